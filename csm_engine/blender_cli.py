@@ -1,0 +1,17 @@
+"""Script for a real Blender binary: ``blender -b -P <this file> -- scene.json shot.png``.
+
+Owns only the bridge from Blender's ``--`` argument convention to ``cli.main``; it works
+from a source checkout, an installed extension or a legacy add-on folder alike.
+"""
+import os
+import sys
+
+if __name__ == "__main__":
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    from csm_engine.cli import main
+
+    argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
+    code = main(argv, prog="blender -b -P blender_cli.py --")
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(code)   # Blender would otherwise exit 0 whatever the script returned

@@ -1,0 +1,300 @@
+"""GLSL programs: loading from ``shaders/``, includes, uniform-block layouts, hot reload.
+
+Owns every ``gpu.types.GPUShader`` the pipeline uses. GLSL lives as real files in
+``shaders/``; ``#include "file.glsl"`` is resolved here (create-info has no include
+mechanism), and each included file gets its own ``#line N id`` so compiler messages can be
+mapped back to ``file.glsl:line``.
+
+Uniform blocks are described once, in Python (``UniformLayout``), which generates both the
+std140 GLSL struct and the numpy packing, so the two can never disagree.
+
+``ShaderLibrary.reload()`` compiles everything anew and swaps only if every program
+compiled: on an error the last good shaders keep running and ``last_error`` says why.
+"""
+
+import os
+import re
+import sys
+import tempfile
+
+import numpy as np
+
+from . import paths
+
+# --------------------------------------------------------------------------------------
+# Uniform blocks (std140; vec4 / mat4 fields only, so the layout is just 16-byte slots)
+# --------------------------------------------------------------------------------------
+
+
+class UniformLayout:
+    """A std140 struct made of vec4 and mat4 fields (arrays allowed).
+
+    ``fields`` is a sequence of ``(name, glsl_type, count)``. Only vec4/mat4 are allowed
+    because their std140 size equals their natural size, which keeps packing trivial.
+    """
+
+    def __init__(self, type_name, fields):
+        self.type_name = type_name
+        self.offsets = {}
+        offset = 0
+        for name, glsl_type, count in fields:
+            floats = {"vec4": 4, "mat4": 16}[glsl_type]
+            self.offsets[name] = (offset, glsl_type, count, floats)
+            offset += floats * count
+        self.fields = tuple(fields)
+        self.float_count = offset
+
+    def glsl(self):
+        lines = [f"struct {self.type_name} {{"]
+        for name, glsl_type, count in self.fields:
+            lines.append(f"  {glsl_type} {name}" + (f"[{count}];" if count > 1 else ";"))
+        lines.append("};")
+        return "\n".join(lines) + "\n"
+
+    def new_data(self):
+        return np.zeros(self.float_count, dtype=np.float32)
+
+    def set(self, data, name, value, index=0):
+        """Write ``value`` into field ``name`` (matrices are given row-major, numpy style)."""
+        offset, glsl_type, count, floats = self.offsets[name]
+        if not 0 <= index < count:
+            raise IndexError(f"{self.type_name}.{name}[{index}] out of range ({count})")
+        start = offset + index * floats
+        value = np.asarray(value, dtype=np.float32)
+        if glsl_type == "mat4":
+            # NOTE: GLSL matrices are column-major; numpy's are row-major. Upload M.T.
+            data[start:start + 16] = value.reshape(4, 4).T.ravel()
+        else:
+            flat = value.ravel()
+            data[start:start + len(flat)] = flat
+
+
+MAX_CASCADES = 4
+MAX_POINT_LIGHTS = 64
+MAX_SPOT_LIGHTS = 8
+MAX_SHADOW_TILES = MAX_CASCADES + MAX_SPOT_LIGHTS
+
+# Everything the lighting pass needs for one frame. Packed by pipeline.py.
+FRAME_LAYOUT = UniformLayout("FrameData", (
+    ("clip_from_world", "mat4", 1),
+    ("view_from_world", "mat4", 1),
+    ("camera_position", "vec4", 1),    # xyz, w = 1 perspective / 0 orthographic
+    ("camera_forward", "vec4", 1),     # xyz world view direction
+    ("viewport", "vec4", 1),           # width, height, 1/width, 1/height (pixels)
+    ("ambient", "vec4", 1),            # rgb ambient, a = background alpha (0 film transparent)
+    ("background", "vec4", 1),         # rgb world colour
+    ("sun_direction", "vec4", 1),      # xyz towards the sun, w = 1 if there is a sun
+    ("sun_color", "vec4", 1),          # rgb intensity, w = 1 if the sun casts shadows
+    ("shadow_params", "vec4", 1),      # cascade count, shadow distance, fade start, blend band
+    ("filter_params", "vec4", 1),      # pcf radius, pcf pattern, depth bias, slope bias (texels)
+    ("bias_params", "vec4", 1),        # normal offset (texels), spot count, point count, 0
+    ("debug_params", "vec4", 1),       # debug view, shadow map index, inset on, 0
+    ("cascade_splits", "vec4", 1),     # far view depth of cascades 0..3
+    ("cascade_near", "vec4", 1),       # near view depth of cascades 0..3 (selection)
+    ("cascade_band", "vec4", 1),       # blend band width before the far split of 0..3
+    ("shadow_from_world", "mat4", MAX_SHADOW_TILES),  # atlas-window (0..1) from world
+    ("shadow_tiles", "vec4", MAX_SHADOW_TILES),       # uv offset xy, uv scale, texel size world
+    ("shadow_depth", "vec4", MAX_SHADOW_TILES),       # light near, far, resolution, is_perspective
+    ("point_lights", "vec4", 2 * MAX_POINT_LIGHTS),   # (position, radius), (color, 0)
+    ("spot_lights", "vec4", 4 * MAX_SPOT_LIGHTS),     # (pos, radius), (color, shadow tile or -1),
+                                                      # (direction, cos outer), (cos inner, ...)
+))
+
+# --------------------------------------------------------------------------------------
+# Program descriptions
+# --------------------------------------------------------------------------------------
+
+# Each program: vertex inputs, interface (name, type, interpolation), push constants,
+# samplers, whether it reads the frame uniform block, fragment outputs.
+PROGRAMS = {
+    "gbuffer": dict(
+        vertex="gbuffer_vert.glsl", fragment="gbuffer_frag.glsl",
+        inputs=(("pos", "VEC3"), ("nor", "VEC3"), ("uv", "VEC2")),
+        interface=(("world_position", "VEC3", "smooth"), ("world_normal", "VEC3", "smooth"),
+                   ("tex_coord", "VEC2", "smooth")),
+        push=(("MAT4", "world_from_object"), ("VEC4", "base_color"),
+              ("VEC4", "material_params")),   # shininess, specular, alpha cutoff, has texture
+        samplers=(("FLOAT_2D", "base_color_texture"),),
+        frame=True,
+        outputs=(("VEC4", "out_albedo"), ("VEC4", "out_normal"), ("VEC4", "out_position")),
+    ),
+    "shadow": dict(
+        vertex="shadow_vert.glsl", fragment="shadow_frag.glsl",
+        inputs=(("pos", "VEC3"), ("uv", "VEC2")),
+        interface=(("tex_coord", "VEC2", "smooth"),),
+        push=(("MAT4", "clip_from_object"), ("VEC4", "material_params")),
+        samplers=(("FLOAT_2D", "base_color_texture"),),
+        frame=False,
+        outputs=(("VEC4", "out_unused"),),
+    ),
+    "lighting": dict(
+        vertex="fullscreen_vert.glsl", fragment="lighting_frag.glsl",
+        inputs=(("pos", "VEC2"),),
+        interface=(("screen_uv", "VEC2", "smooth"),),
+        push=(),
+        samplers=(("FLOAT_2D", "gbuffer_albedo"), ("FLOAT_2D", "gbuffer_normal"),
+                  ("FLOAT_2D", "gbuffer_position"), ("FLOAT_2D", "shadow_atlas")),
+        frame=True,
+        outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
+    ),
+    "lines": dict(
+        vertex="lines_vert.glsl", fragment="lines_frag.glsl",
+        inputs=(("pos", "VEC3"), ("color", "VEC4")),
+        interface=(("line_color", "VEC4", "smooth"),),
+        push=(("MAT4", "clip_from_world"),),
+        samplers=(),
+        frame=False,
+        outputs=(("VEC4", "out_color"),),
+    ),
+}
+
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
+
+
+class ShaderCompileError(Exception):
+    """A GLSL program failed to compile; the message names file and line where known."""
+
+
+def _expand_includes(name, directory, file_ids, depth=0):
+    """Return ``name``'s source with includes inlined and ``#line`` markers for mapping."""
+    if depth > 8:
+        raise ShaderCompileError(f"{name}: #include nested too deeply (a cycle?)")
+    path = os.path.join(directory, name)
+    try:
+        with open(path, encoding="utf-8") as handle:
+            text = handle.read()
+    except OSError as error:
+        raise ShaderCompileError(f"{path}: cannot read shader ({error.strerror})") from None
+    file_id = file_ids.setdefault(name, len(file_ids) + 1)
+    out = [f"#line 1 {file_id}"]
+    for number, line in enumerate(text.splitlines(), start=1):
+        match = _INCLUDE.match(line)
+        if match:
+            out.append(_expand_includes(match.group(1), directory, file_ids, depth + 1))
+            out.append(f"#line {number + 1} {file_id}")
+        else:
+            out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def _map_log(log, file_ids):
+    """Rewrite Mesa/NVIDIA style ``ID:LINE(COL)`` or ``ID(LINE)`` locations to file names."""
+    names = {str(i): n for n, i in file_ids.items()}
+
+    def replace(match):
+        name = names.get(match.group(1))
+        return f"{name}:{match.group(2)}" if name else match.group(0)
+
+    log = re.sub(r"\b(\d+):(\d+)\(\d+\)", replace, log)
+    return re.sub(r"\b(\d+)\((\d+)\)", replace, log)
+
+
+class _CapturedOutput:
+    """Capture what the GL driver and Blender print to stdout/stderr at the fd level."""
+
+    def __enter__(self):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        self._file = tempfile.TemporaryFile(mode="w+b")
+        self._saved = (os.dup(1), os.dup(2))
+        os.dup2(self._file.fileno(), 1)
+        os.dup2(self._file.fileno(), 2)
+        return self
+
+    def __exit__(self, *exc):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os.dup2(self._saved[0], 1)
+        os.dup2(self._saved[1], 2)
+        os.close(self._saved[0])
+        os.close(self._saved[1])
+        self._file.seek(0)
+        self.text = self._file.read().decode("utf-8", "replace")
+        self._file.close()
+        return False
+
+
+def _build(program_name, spec, directory):
+    import gpu
+
+    file_ids = {}
+    vertex = _expand_includes(spec["vertex"], directory, file_ids)
+    fragment = _expand_includes(spec["fragment"], directory, file_ids)
+
+    info = gpu.types.GPUShaderCreateInfo()
+    interface = gpu.types.GPUStageInterfaceInfo(f"csm_{program_name}_iface")
+    for name, kind, interpolation in spec["interface"]:
+        getattr(interface, interpolation)(kind, name)
+    for slot, (name, kind) in enumerate(spec["inputs"]):
+        info.vertex_in(slot, kind, name)
+    info.vertex_out(interface)
+    for kind, name in spec["push"]:
+        info.push_constant(kind, name)
+    for slot, (kind, name) in enumerate(spec["samplers"]):
+        info.sampler(slot, kind, name)
+    if spec["frame"]:
+        info.typedef_source(FRAME_LAYOUT.glsl())
+        info.uniform_buf(0, FRAME_LAYOUT.type_name, "frame")
+    for slot, (kind, name) in enumerate(spec["outputs"]):
+        info.fragment_out(slot, kind, name)
+    info.define("MAX_CASCADES", str(MAX_CASCADES))
+    info.define("MAX_POINT_LIGHTS", str(MAX_POINT_LIGHTS))
+    info.define("MAX_SPOT_LIGHTS", str(MAX_SPOT_LIGHTS))
+    info.vertex_source(vertex)
+    info.fragment_source(fragment)
+
+    with _CapturedOutput() as captured:
+        try:
+            shader = gpu.shader.create_from_info(info)
+            failed = None
+        except Exception as error:  # Blender raises a bare Exception on compile errors
+            shader, failed = None, error
+    if failed is not None:
+        log = _map_log(captured.text, file_ids)
+        errors = [line.strip() for line in log.splitlines()
+                  if "error" in line.lower() and "EGL" not in line]
+        detail = "; ".join(errors[:5]) or str(failed)
+        raise ShaderCompileError(f"shader '{program_name}' failed to compile: {detail}")
+    # Pass through anything else the driver said (warnings), as Blender would have.
+    noise = [line for line in captured.text.splitlines() if line and "EGL" not in line]
+    if noise:
+        print("\n".join(noise))
+    return shader
+
+
+class ShaderLibrary:
+    """All programs, compiled lazily together; reload keeps the last good set on error."""
+
+    def __init__(self, directory=None):
+        self.directory = directory
+        self._shaders = None
+        self.last_error = None
+        self.generation = 0
+
+    def _compile_all(self):
+        directory = self.directory or paths.shaders_dir()
+        return {name: _build(name, spec, directory) for name, spec in PROGRAMS.items()}
+
+    def get(self, name):
+        if self._shaders is None:
+            self._shaders = self._compile_all()
+            self.generation += 1
+        return self._shaders[name]
+
+    def reload(self):
+        """Recompile every program from disk. Returns None on success, else the message."""
+        try:
+            shaders = self._compile_all()
+        except ShaderCompileError as error:
+            self.last_error = str(error)
+            print(f"CSM: {self.last_error} (keeping the previous shaders)", file=sys.stderr)
+            return self.last_error
+        self._shaders = shaders
+        self.last_error = None
+        self.generation += 1
+        return None
+
+
+# Shaders may be shared between GPU contexts (unlike framebuffers), so one library serves
+# the viewport and final renders alike.
+LIBRARY = ShaderLibrary()

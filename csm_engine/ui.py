@@ -1,0 +1,110 @@
+"""Panels: the CSM settings in Properties > Render and in the 3D View sidebar ("CSM" tab).
+
+Owns layout only. Both places draw the same groups through ``draw_*`` functions, so a
+setting appears identically wherever the user looks for it.
+"""
+
+import bpy
+
+
+def draw_cascades(layout, csm):
+    col = layout.column()
+    col.prop(csm, "cascade_count")
+    col.prop(csm, "split_scheme")
+    if csm.split_scheme == 'HYBRID':
+        col.prop(csm, "split_lambda")
+    if csm.split_scheme == 'MANUAL':
+        row = col.row(align=True)
+        for i in range(max(csm.cascade_count - 1, 0)):
+            row.prop(csm, "manual_splits", index=i, text=f"Split {i + 1}")
+    col.prop(csm, "shadow_distance")
+    col.prop(csm, "resolution")
+    col.prop(csm, "equal_resolution")
+    col.prop(csm, "stabilize")
+    row = col.row(align=True)
+    row.prop(csm, "fade_out")
+    sub = row.row()
+    sub.active = csm.fade_out
+    sub.prop(csm, "fade_fraction", text="")
+
+
+def draw_filtering(layout, csm):
+    col = layout.column()
+    col.prop(csm, "pcf_radius")
+    col.prop(csm, "pcf_pattern")
+    col.prop(csm, "blend_band")
+
+
+def draw_bias(layout, csm):
+    col = layout.column()
+    col.prop(csm, "depth_bias")
+    col.prop(csm, "slope_bias")
+    col.prop(csm, "normal_offset")
+    col.prop(csm, "cull_front_faces")
+
+
+def draw_occluders(layout, csm):
+    col = layout.column()
+    col.prop(csm, "occluder_margin_auto")
+    sub = col.column()
+    sub.active = not csm.occluder_margin_auto
+    sub.prop(csm, "occluder_margin")
+
+
+def draw_debug(layout, csm):
+    col = layout.column()
+    col.prop(csm, "debug_view")
+    col.prop(csm, "debug_shadow_map")
+    col.prop(csm, "debug_inset")
+    col.prop(csm, "freeze_cascades")
+
+
+def draw_lighting(layout, context):
+    col = layout.column()
+    col.prop(context.scene.csm, "ambient_strength")
+    col.prop(context.scene.render, "film_transparent")
+
+
+GROUPS = (
+    ("cascades", "Cascades", lambda layout, context: draw_cascades(layout, context.scene.csm)),
+    ("filtering", "Filtering", lambda layout, context: draw_filtering(layout, context.scene.csm)),
+    ("bias", "Bias", lambda layout, context: draw_bias(layout, context.scene.csm)),
+    ("occluders", "Occluders", lambda layout, context: draw_occluders(layout, context.scene.csm)),
+    ("lighting", "Lighting", draw_lighting),
+    ("debug", "Debug", lambda layout, context: draw_debug(layout, context.scene.csm)),
+)
+
+
+def _make_panel(space, region, context_name, key, label, draw_fn, category=None):
+    attrs = {
+        "bl_idname": f"CSM_PT_{space.lower()}_{key}",
+        "bl_label": label,
+        "bl_space_type": space,
+        "bl_region_type": region,
+        "COMPAT_ENGINES": {"CSM"},
+        "poll": classmethod(lambda cls, context: context.engine == "CSM"),
+        "draw": lambda self, context: (setattr(self.layout, "use_property_split", True),
+                                       draw_fn(self.layout, context)),
+    }
+    if context_name:
+        attrs["bl_context"] = context_name
+    if category:
+        attrs["bl_category"] = category
+    return type(attrs["bl_idname"], (bpy.types.Panel,), attrs)
+
+
+classes = tuple(
+    [_make_panel('PROPERTIES', 'WINDOW', "render", key, label, fn)
+     for key, label, fn in GROUPS] +
+    [_make_panel('VIEW_3D', 'UI', None, key, label, fn, category="CSM")
+     for key, label, fn in GROUPS])
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

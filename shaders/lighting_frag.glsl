@@ -1,0 +1,158 @@
+/* Deferred lighting pass: ambient + sun (with cascaded shadows) + point + spot lights, and
+ * every debug view. Writes scene-linear colour (Blender applies the view transform) and an
+ * auxiliary target: sun visibility, cascade index, view depth, coverage. */
+#include "common.glsl"
+
+vec3 show_shadow_map(int t, vec2 uv)
+{
+  vec4 tile = frame.shadow_tiles[t];
+  vec4 depth_info = frame.shadow_depth[t];
+  ivec2 p = ivec2(clamp(uv, 0.0, 1.0) * (tile.z - 1.0)) + ivec2(tile.xy);
+  float linear = shadow_linear_depth(texelFetch(shadow_atlas, p, 0).r, depth_info);
+  return vec3((linear - depth_info.x) / max(depth_info.y - depth_info.x, 1e-6));
+}
+
+/* Where a square shadow-map view sits on screen: full screen (centred square) or inset. */
+bool shadow_map_uv(vec2 pixel, out vec2 uv)
+{
+  vec2 size = frame.viewport.xy;
+  float side = frame.debug_params.z > 0.5 ? 0.35 * min(size.x, size.y) : min(size.x, size.y);
+  vec2 origin = frame.debug_params.z > 0.5 ? vec2(8.0) : 0.5 * (size - vec2(side));
+  uv = (pixel - origin) / side;
+  return all(greaterThanEqual(uv, vec2(0.0))) && all(lessThanEqual(uv, vec2(1.0)));
+}
+
+void main()
+{
+  vec2 pixel = screen_uv * frame.viewport.xy;
+  ivec2 px = ivec2(pixel);
+  vec4 albedo_spec = texelFetch(gbuffer_albedo, px, 0);
+  vec4 normal_shine = texelFetch(gbuffer_normal, px, 0);
+  vec4 position = texelFetch(gbuffer_position, px, 0);
+  int debug_view = int(frame.debug_params.x);
+  int shadow_tile_count = int(frame.shadow_params.x) + int(frame.bias_params.y);
+
+  if (debug_view == DEBUG_SHADOW_MAP || frame.debug_params.z > 0.5) {
+    vec2 uv;
+    int t = clamp(int(frame.debug_params.y), 0, max(shadow_tile_count - 1, 0));
+    if (shadow_tile_count > 0 && shadow_map_uv(pixel, uv)) {
+      out_color = vec4(show_shadow_map(t, uv), 1.0);
+      out_aux = vec4(1.0, -1.0, 0.0, 1.0);
+      return;
+    }
+    if (debug_view == DEBUG_SHADOW_MAP && frame.debug_params.z < 0.5) {
+      out_color = vec4(0.0, 0.0, 0.0, 1.0);
+      out_aux = vec4(1.0, -1.0, 0.0, 1.0);
+      return;
+    }
+  }
+
+  if (position.w < 0.5) {
+    /* Background: the World colour; alpha 0 with Film > Transparent. */
+    out_color = vec4(frame.background.rgb, frame.ambient.a);
+    out_aux = vec4(1.0, -1.0, 1e10, 0.0);
+    return;
+  }
+
+  vec3 p = position.xyz;
+  vec3 n = normalize(normal_shine.xyz);
+  vec3 albedo = albedo_spec.rgb;
+  float specular = albedo_spec.a;
+  float shininess = normal_shine.w;
+  vec3 to_camera = frame.camera_position.w > 0.5 ? normalize(frame.camera_position.xyz - p) :
+                                                   -frame.camera_forward.xyz;
+  float view_depth = dot(p - frame.camera_position.xyz, frame.camera_forward.xyz);
+
+  vec3 color = frame.ambient.rgb * albedo;
+
+  float sun_vis = 1.0;
+  float cascade = -1.0;
+  if (frame.sun_direction.w > 0.5) {
+    vec3 l = normalize(frame.sun_direction.xyz);
+    float n_dot_l = dot(n, l);
+    if (frame.sun_color.w > 0.5) {
+      sun_vis = sun_visibility(p, n, n_dot_l, view_depth, cascade);
+    }
+    color += frame.sun_color.rgb * blinn_phong(albedo, specular, shininess, n, l, to_camera) *
+             sun_vis;
+  }
+
+  int point_count = int(frame.bias_params.z);
+  for (int i = 0; i < MAX_POINT_LIGHTS; i++) {
+    if (i >= point_count) {
+      break;
+    }
+    vec4 pos_radius = frame.point_lights[2 * i];
+    vec3 to_light = pos_radius.xyz - p;
+    float d = length(to_light);
+    /* The course's falloff: linear to zero at the light's radius. */
+    float attenuation = 1.0 - min(d / max(pos_radius.w, 1e-6), 1.0);
+    if (attenuation > 0.0) {
+      color += frame.point_lights[2 * i + 1].rgb * attenuation *
+               blinn_phong(albedo, specular, shininess, n, to_light / max(d, 1e-6), to_camera);
+    }
+  }
+
+  int spot_count = int(frame.bias_params.y);
+  int cascade_count = int(frame.shadow_params.x);
+  for (int i = 0; i < MAX_SPOT_LIGHTS; i++) {
+    if (i >= spot_count) {
+      break;
+    }
+    vec4 pos_radius = frame.spot_lights[4 * i];
+    vec4 color_tile = frame.spot_lights[4 * i + 1];
+    vec4 dir_outer = frame.spot_lights[4 * i + 2];
+    vec4 inner = frame.spot_lights[4 * i + 3];
+    vec3 to_light = pos_radius.xyz - p;
+    float d = length(to_light);
+    vec3 l = to_light / max(d, 1e-6);
+    float cone = smoothstep(dir_outer.w, inner.x, dot(-l, normalize(dir_outer.xyz)));
+    float attenuation = (1.0 - min(d / max(pos_radius.w, 1e-6), 1.0)) * cone;
+    if (attenuation > 0.0) {
+      float vis = 1.0;
+      if (color_tile.w >= 0.0) {
+        vis = shadow_tile_visibility(int(color_tile.w), p, n, dot(n, l));
+      }
+      color += color_tile.rgb * attenuation * vis *
+               blinn_phong(albedo, specular, shininess, n, l, to_camera);
+    }
+  }
+
+  if (debug_view == DEBUG_CASCADES) {
+    color *= cascade_color(cascade);
+  }
+  else if (debug_view == DEBUG_SHADOW_FACTOR) {
+    color = vec3(sun_vis);
+  }
+  else if (debug_view == DEBUG_TEXEL_DENSITY) {
+    int c = cascade_index(view_depth);
+    if (c < 0) {
+      color = vec3(0.5);
+    }
+    else {
+      float pixel_world = max(length(dFdx(p)), length(dFdy(p)));
+      float texels_per_pixel = pixel_world / max(frame.shadow_tiles[c].w, 1e-9);
+      /* log2 scale: 1/8 texel per pixel -> red, 1 -> green, 8 -> blue. */
+      color = heat_color(log2(max(texels_per_pixel, 1e-6)) / 6.0 + 0.5) *
+              (0.35 + 0.65 * clamp(dot(n, normalize(frame.sun_direction.xyz)), 0.0, 1.0));
+    }
+  }
+  else if (debug_view == DEBUG_ALBEDO) {
+    color = albedo;
+  }
+  else if (debug_view == DEBUG_NORMAL) {
+    color = n * 0.5 + 0.5;
+  }
+  else if (debug_view == DEBUG_POSITION) {
+    color = fract(p);
+  }
+  else if (debug_view == DEBUG_DEPTH) {
+    color = vec3(clamp(view_depth / max(frame.shadow_params.y, 1e-6), 0.0, 1.0));
+  }
+  else if (debug_view == DEBUG_SPECULAR) {
+    color = vec3(specular, shininess / 256.0, 0.0);
+  }
+
+  out_color = vec4(color, 1.0);
+  out_aux = vec4(sun_vis, cascade, view_depth, 1.0);
+}

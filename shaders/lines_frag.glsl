@@ -1,0 +1,4 @@
+void main()
+{
+  out_color = line_color;
+}
