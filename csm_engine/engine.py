@@ -14,7 +14,9 @@ from . import mesh_cache, pipeline, shaders, snapshot
 
 # The last error a final render hit (None when it succeeded); the CLI reads it because
 # RenderEngine.report() does not reach a caller in background mode.
-LAST_RENDER = {"error": None, "warnings": [], "timings": {}}
+# Tests set "keep_images" to also get the passes as numpy arrays (top row last, like GL).
+LAST_RENDER = {"error": None, "warnings": [], "timings": {}, "keep_images": False,
+               "images": None, "plan": None}
 
 
 def _write_pass(render_pass, pixels):
@@ -58,7 +60,7 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         self.register_pass(scene, renderlayer, "Cascade", 1, "X", 'VALUE')
 
     def render(self, depsgraph):
-        LAST_RENDER.update(error=None, warnings=[], timings={})
+        LAST_RENDER.update(error=None, warnings=[], timings={}, images=None, plan=None)
         scene = depsgraph.scene
         scale = scene.render.resolution_percentage / 100.0
         width = max(int(scene.render.resolution_x * scale), 1)
@@ -102,6 +104,8 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         for warning in renderer.warnings:
             self.report({'WARNING'}, "CSM: " + warning)
         LAST_RENDER.update(warnings=list(renderer.warnings), timings=dict(renderer.timings))
+        if LAST_RENDER["keep_images"]:
+            LAST_RENDER.update(images=images, plan=plan)
         self.update_progress(1.0)
 
     def _fail(self, message):

@@ -98,27 +98,26 @@ def plan_shadows(snap, bounds):
     frozen_camera = None
     if snap.sun is not None and snap.sun.casts_shadow:
         margin = None if s.occluder_margin_auto else float(s.occluder_margin)
-        manual = [float(v) * distance for v in s.manual_splits[:max(count - 1, 0)]]
+        manual = cascades.manual_splits_from_fractions(distance, s.manual_splits, count)
         key = snap.scene_name
         if s.freeze_cascades and key in _FROZEN:
             result, frozen_camera = _FROZEN[key]
         else:
             result = cascades.compute_cascades(
-                world_from_view=camera.world_from_view, clip_from_view=camera.clip_from_view,
-                clip_start=camera.clip_start, clip_end=camera.clip_end,
-                is_perspective=camera.is_perspective,
+                camera.world_from_view, camera.clip_from_view, -snap.sun.to_light,
                 count=count, scheme=s.split_scheme, lam=float(s.split_lambda),
-                manual=manual, shadow_distance=distance,
-                base_resolution=int(s.resolution), equal_resolution=bool(s.equal_resolution),
-                stabilize=bool(s.stabilize), occluder_margin=margin,
-                scene_bounds=bounds, light_dir=-snap.sun.to_light,
-                blend_band=float(s.blend_band))
+                manual=manual if s.split_scheme == 'MANUAL' else None,
+                shadow_distance=distance, base_resolution=int(s.resolution),
+                equal_resolution=bool(s.equal_resolution), stabilize=bool(s.stabilize),
+                occluder_margin=margin, scene_bounds=bounds, blend_band=float(s.blend_band))
             if s.freeze_cascades:
                 _FROZEN[key] = (result, camera)
                 frozen_camera = camera
             else:
                 _FROZEN.pop(key, None)
-        splits, bands = result.splits, result.bands
+        splits = result.splits
+        bands = np.zeros(MAX_CASCADES)
+        bands[:count] = cascades.blend_band_widths(splits, float(s.blend_band))
         for fit in result.cascades:
             tiles.append(ShadowTile(fit.clip_from_world, fit.resolution, fit.texel_size_world,
                                     fit.near, fit.far, False, cascade=fit))
@@ -131,7 +130,8 @@ def plan_shadows(snap, bounds):
         near = max(spot.clip_start, 1e-3)
         far = max(spot.radius, near * 2.0)
         light_from_world, clip_from_light = cascades.spot_light_matrices(
-            spot.world_from_light, spot.spot_size, near, far)
+            spot.world_from_light, min(spot.spot_size, np.radians(179.0)), near, far)
+        # A 180 degree cone has no perspective projection; 179 is the widest we draw.
         half = 0.5 * min(spot.spot_size, np.radians(179.0))
         spot_tiles[index] = len(tiles)
         tiles.append(ShadowTile(clip_from_light @ light_from_world, resolution,
