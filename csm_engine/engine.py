@@ -79,7 +79,8 @@ class CSMRenderEngine(bpy.types.RenderEngine):
                                  " triangles")
         renderer = pipeline.Pipeline()
         try:
-            images, plan = renderer.render_offscreen(snap, cache)
+            images, plan = renderer.render_offscreen(
+                snap, cache, with_positions=LAST_RENDER["keep_images"])
         except shaders.ShaderCompileError as error:
             self._fail(str(error))
             return

@@ -109,7 +109,10 @@ def plan_shadows(snap, bounds):
                 manual=manual if s.split_scheme == 'MANUAL' else None,
                 shadow_distance=distance, base_resolution=int(s.resolution),
                 equal_resolution=bool(s.equal_resolution), stabilize=bool(s.stabilize),
-                occluder_margin=margin, scene_bounds=bounds, blend_band=float(s.blend_band))
+                occluder_margin=margin, blend_band=float(s.blend_band),
+                # Auto: the near plane reaches the scene's bounds, so no caster is clipped.
+                # Manual: exactly the margin the user typed, nothing added.
+                scene_bounds=bounds if s.occluder_margin_auto else None)
             if s.freeze_cascades:
                 _FROZEN[key] = (result, camera)
                 frozen_camera = camera
@@ -457,8 +460,9 @@ class Pipeline:
         batch.draw(shader)
 
     # -- read-back for final renders -----------------------------------------------------
-    def render_offscreen(self, snap, cache):
-        """Draw into offscreen float targets and read back (combined, aux, normal)."""
+    def render_offscreen(self, snap, cache, with_positions=False):
+        """Draw into offscreen float targets and read back (combined, aux, normal, and the
+        G-buffer's world positions when asked: tests ray-cast from them)."""
         import gpu
         width, height = snap.camera.width, snap.camera.height
         color = self._texture("final_color", (width, height), 'RGBA32F')
@@ -470,8 +474,10 @@ class Pipeline:
         t = time.perf_counter()
         out = {}
         count = width * height * 4
-        for name, fb, slot in (("combined", target, 0), ("aux", target, 1),
-                               ("normal", self.gbuffer_fb, 1)):
+        reads = [("combined", target, 0), ("aux", target, 1), ("normal", self.gbuffer_fb, 1)]
+        if with_positions:
+            reads.append(("position", self.gbuffer_fb, 2))
+        for name, fb, slot in reads:
             buffer = gpu.types.Buffer('FLOAT', count)
             with fb.bind():
                 fb.read_color(0, 0, width, height, 4, slot, 'FLOAT', data=buffer)
