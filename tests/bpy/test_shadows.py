@@ -247,8 +247,8 @@ def test_spot_light_casts_a_shadow(empty_scene):
     spot.data.use_custom_distance = True
     spot.data.cutoff_distance = 30.0
     add_camera(scene, (4.0, -14.0, 14.0), (2.0, 0.0, 0.0))
-    scene.world = bpy.data.worlds.new("black")
-    scene.world.color = (0, 0, 0)
+    from test_render import set_world_color
+    set_world_color(scene, (0.0, 0.0, 0.0))
 
     images = render_scene(scene, 320, 240)
     position = images["position"]
