@@ -107,8 +107,12 @@ def material_info(material):
     roughness = _find_input(bsdf, "Roughness")
     info.shininess = _shininess(roughness.default_value if roughness is not None else 0.5)
     specular = _find_input(bsdf, "Specular IOR Level", "Specular")
-    if specular is not None and not specular.is_linked:
-        info.specular = float(specular.default_value)
+    level = float(specular.default_value) if specular is not None and \
+        not specular.is_linked else 0.5
+    # A fully rough surface has no visible highlight; without this, roughness 1 (glTF's
+    # default) gives exponent 1 and washes everything white.
+    r = roughness.default_value if roughness is not None else 0.5
+    info.specular = level * (1.0 - min(max(r, 0.0), 1.0)) ** 2
     alpha = _find_input(bsdf, "Alpha")
     if alpha is not None and not alpha.is_linked:
         info.base_color = info.base_color[:3] + (float(alpha.default_value),)

@@ -82,12 +82,22 @@ float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l)
   float lit = 0.0;
   float taps = 0.0;
   if (pattern == PCF_GRID) {
-    for (int y = -radius; y <= radius; y++) {
-      for (int x = -radius; x <= radius; x++) {
-        lit += shadow_tap(tile, depth_info, texel + vec2(x, y), receiver, bias);
-        taps += 1.0;
+    /* (2r+1)^2 bilinearly weighted taps, gathered as the (2r+2)^2 texels they touch with
+     * separable weights: the same footprint as hard taps, but edges ramp smoothly instead
+     * of in texel-sized stair steps. */
+    vec2 t = texel - 0.5;
+    vec2 base = floor(t);
+    vec2 f = t - base;
+    int last = 2 * radius + 1;
+    for (int y = 0; y <= last; y++) {
+      float wy = (y == 0) ? 1.0 - f.y : ((y == last) ? f.y : 1.0);
+      for (int x = 0; x <= last; x++) {
+        float wx = (x == 0) ? 1.0 - f.x : ((x == last) ? f.x : 1.0);
+        vec2 center = base + vec2(float(x - radius), float(y - radius)) + 0.5;
+        lit += wx * wy * shadow_tap(tile, depth_info, center, receiver, bias);
       }
     }
+    taps = float(last * last);
   }
   else {
     float r = float(radius);

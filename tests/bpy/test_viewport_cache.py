@@ -64,7 +64,8 @@ def test_moving_an_object_uploads_nothing_and_editing_uploads_one(empty_scene):
         moved = [i for i in snap.instances if i.key == cube.name][0]
         assert moved.world_from_object[0, 3] == 2.0
 
-        cube.data.vertices[0].co.z += 1.0   # a geometry change of one mesh
+        top = max(cube.data.vertices, key=lambda v: v.co.z)
+        top.co.z += 1.0                     # a geometry change of one mesh: lift a corner
         cube.data.update()
         bpy.context.view_layer.update()
         view.redraw()
