@@ -119,7 +119,10 @@ void main()
   }
 
   if (debug_view == DEBUG_CASCADES) {
-    color *= cascade_color(cascade);
+    /* Hue from the cascade, brightness from the lit image: readable on any albedo (a plain
+     * multiply turns green grass under the blue cascade black). */
+    float luma = dot(color, vec3(0.2126, 0.7152, 0.0722));
+    color = cascade_color(cascade) * (0.15 + 0.85 * min(luma, 1.0));
   }
   else if (debug_view == DEBUG_SHADOW_FACTOR) {
     color = vec3(sun_vis);
