@@ -1,0 +1,189 @@
+"""Helpers for the host tests: find each Blender host, give it throwaway user folders, run
+scripts in it as a subprocess and read back what it reported and rendered.
+
+The hosts are the ones a user has: pip bpy 5.0 (this interpreter, ``.venv``), pip bpy 4.2
+(``$CSM_BPY42_PYTHON``, by default ``<repo>/.venv-bpy42``) and Debian's Blender 3.4
+(``$CSM_BLENDER``, by default ``blender`` on PATH). ``./dev test`` sets all of them up.
+A missing host is a test failure that says how to get it, never a skip.
+
+Every host runs in a fresh subprocess whose Blender user folders (config, scripts,
+extensions) point into a temporary directory, so the user's real Blender setup is never
+read or written and each test starts from a clean install.
+"""
+
+import json
+import os
+import shutil
+import struct
+import subprocess
+import sys
+import zlib
+
+import numpy as np
+import pytest
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+RESULT_PREFIX = "CSM_RESULT "
+HOST_TIMEOUT_S = 600
+
+
+def _check_interpreter(python, what, how_to_get):
+    if not python or not os.path.isfile(python) or not os.access(python, os.X_OK):
+        pytest.fail(f"{what} host not found (looked for {python!r}): {how_to_get}", pytrace=False)
+    return python
+
+
+def bpy50_python():
+    """Interpreter with pip bpy 5.0: $CSM_BPY50_PYTHON, else the one running pytest."""
+    return _check_interpreter(
+        os.environ.get("CSM_BPY50_PYTHON") or sys.executable, "pip bpy 5.0",
+        "run the tests with ./dev test, or set CSM_BPY50_PYTHON")
+
+
+def bpy42_python():
+    """Interpreter with pip bpy 4.2: $CSM_BPY42_PYTHON, else <repo>/.venv-bpy42."""
+    return _check_interpreter(
+        os.environ.get("CSM_BPY42_PYTHON") or os.path.join(REPO, ".venv-bpy42", "bin", "python"),
+        "pip bpy 4.2", "run ./dev test (it creates .venv-bpy42 from requirements-bpy42.txt), "
+        "or set CSM_BPY42_PYTHON to a Python 3.11 with bpy 4.2")
+
+
+def blender_binary():
+    """Debian's Blender 3.4: $CSM_BLENDER, else `blender` on PATH."""
+    return _check_interpreter(
+        os.environ.get("CSM_BLENDER") or shutil.which("blender"), "Debian Blender 3.4",
+        "apt-get install blender (./dev test does this as root), or set CSM_BLENDER")
+
+
+def extension_tool():
+    """Blender's own extension tool, shipped inside pip bpy 5.0."""
+    script = ("import bpy, os; print(os.path.join(bpy.utils.system_resource('SCRIPTS'), "
+              "'addons_core', 'bl_pkg', 'cli', 'blender_ext.py'))")
+    result = subprocess.run([bpy50_python(), "-c", script], capture_output=True, text=True,
+                            timeout=HOST_TIMEOUT_S)
+    path = result.stdout.strip().splitlines()[-1] if result.stdout.strip() else ""
+    if result.returncode != 0 or not os.path.isfile(path):
+        pytest.fail(f"Blender's extension tool not found in pip bpy 5.0:\n{result.stderr[-2000:]}",
+                    pytrace=False)
+    return path
+
+
+def user_dirs_env(root):
+    """Environment for a host whose Blender user folders all live under ``root``."""
+    env = dict(os.environ)
+    # The installed archive must be what runs, never the checkout.
+    env.pop("PYTHONPATH", None)
+    env.pop("PYTHONHOME", None)
+    env.pop("PYTHONSTARTUP", None)
+    for name, folder in (("BLENDER_USER_RESOURCES", "resources"), ("BLENDER_USER_CONFIG", "config"),
+                         ("BLENDER_USER_SCRIPTS", "scripts"), ("BLENDER_USER_DATAFILES", "datafiles"),
+                         ("BLENDER_USER_EXTENSIONS", "extensions")):
+        env[name] = os.path.join(root, "blender-user", folder)
+        os.makedirs(env[name], exist_ok=True)
+    env["PYTHONDONTWRITEBYTECODE"] = "1"
+    return env
+
+
+class HostRun:
+    """What one host subprocess did: exit code, output, and its ``CSM_RESULT`` JSON."""
+
+    def __init__(self, command, completed):
+        self.command = command
+        self.returncode = completed.returncode
+        self.output = completed.stdout + completed.stderr
+        self.result = {}
+        for line in completed.stdout.splitlines():
+            if line.startswith(RESULT_PREFIX):
+                self.result = json.loads(line[len(RESULT_PREFIX):])
+
+    def describe(self):
+        tail = "\n".join(self.output.strip().splitlines()[-40:])
+        return f"command: {' '.join(self.command)}\nexit code: {self.returncode}\noutput (tail):\n{tail}"
+
+
+def run_host(command, env, cwd):
+    """Run one host command; cwd should be a temporary folder so the checkout is not on
+    sys.path. Never raises for a failing host: the caller asserts on the HostRun."""
+    try:
+        completed = subprocess.run(command, env=env, cwd=cwd, capture_output=True, text=True,
+                                   stdin=subprocess.DEVNULL, timeout=HOST_TIMEOUT_S)
+    except subprocess.TimeoutExpired as error:
+        pytest.fail(f"host timed out after {HOST_TIMEOUT_S} s: {' '.join(command)}\n"
+                    f"{(error.stdout or b'')[-2000:]!r}", pytrace=False)
+    return HostRun(command, completed)
+
+
+def read_png(path):
+    """PNG -> float array (height, width, channels) in 0..1, top row first.
+
+    A small reader for the non-interlaced 8/16-bit PNGs Blender writes, so the tests need
+    no imaging library beyond numpy."""
+    with open(path, "rb") as handle:
+        data = handle.read()
+    assert data[:8] == b"\x89PNG\r\n\x1a\n", f"{path} is not a PNG"
+    offset, chunks, header = 8, [], None
+    while offset < len(data):
+        length, kind = struct.unpack(">I4s", data[offset:offset + 8])
+        body = data[offset + 8:offset + 8 + length]
+        if kind == b"IHDR":
+            header = struct.unpack(">IIBBBBB", body)
+        elif kind == b"IDAT":
+            chunks.append(body)
+        offset += 12 + length
+    width, height, depth, color_type, _, _, interlace = header
+    assert interlace == 0 and depth in (8, 16), f"{path}: unsupported PNG (depth {depth})"
+    channels = {0: 1, 2: 3, 4: 2, 6: 4}[color_type]
+    bytes_per_pixel = channels * depth // 8
+    stride = width * bytes_per_pixel
+    raw = np.frombuffer(zlib.decompress(b"".join(chunks)), np.uint8).reshape(height, stride + 1)
+    rows = np.zeros((height, stride), np.int32)
+    previous = np.zeros(stride, np.int32)
+    for y in range(height):
+        kind, line = raw[y, 0], raw[y, 1:].astype(np.int32)
+        if kind == 0:
+            row = line
+        elif kind == 2:
+            row = (line + previous) & 0xFF
+        else:
+            # Sub, Average and Paeth depend on the pixel to the left: one pass per byte group.
+            row = np.zeros(stride, np.int32)
+            for x in range(stride):
+                left = row[x - bytes_per_pixel] if x >= bytes_per_pixel else 0
+                up = previous[x]
+                up_left = previous[x - bytes_per_pixel] if x >= bytes_per_pixel else 0
+                if kind == 1:
+                    predictor = left
+                elif kind == 3:
+                    predictor = (left + up) // 2
+                else:
+                    p = left + up - up_left
+                    pa, pb, pc = abs(p - left), abs(p - up), abs(p - up_left)
+                    predictor = left if pa <= pb and pa <= pc else (up if pb <= pc else up_left)
+                row[x] = (line[x] + predictor) & 0xFF
+        rows[y] = row
+        previous = row
+    samples = rows.astype(np.uint8)
+    if depth == 16:
+        samples = samples.reshape(height, -1, 2)
+        values = (samples[..., 0].astype(np.float64) * 256 + samples[..., 1]) / 65535.0
+    else:
+        values = samples.astype(np.float64) / 255.0
+    return values.reshape(height, width, channels)
+
+
+def luminance(image):
+    rgb = image[..., :3] if image.shape[-1] >= 3 else np.repeat(image[..., :1], 3, axis=-1)
+    return rgb @ np.array([0.2126, 0.7152, 0.0722])
+
+
+@pytest.fixture
+def host_dir(tmp_path):
+    """A clean working folder for one host run, with throwaway Blender user folders."""
+    return tmp_path
+
+
+@pytest.fixture(scope="session")
+def hosts():
+    """These helpers as one object, so tests never `import conftest` (several test folders
+    have a conftest.py, and that import would pick whichever was loaded last)."""
+    return sys.modules[__name__]

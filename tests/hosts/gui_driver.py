@@ -1,0 +1,254 @@
+"""Runs inside a real Blender window (``blender -p 0 0 W H -P gui_driver.py -- OUT_DIR``) and
+records what the 3D viewport shows in CSM rendered mode, for ``test_gui_viewport.py``.
+
+Owns the in-Blender half of the GUI test: import the default scene into an empty startup
+scene, switch the biggest 3D viewport to Rendered shading with the CSM engine, look through
+the scene camera with the camera frame fitted to the view, wait until the engine has drawn,
+save a full-window screenshot, then render the same camera with F12 semantics
+(``render.render(write_still=True)``) at the size the camera frame has on screen.
+
+It writes into OUT_DIR:
+- ``viewport.png``: the whole Blender window, top row first;
+- ``render.png``: the F12 render;
+- ``render_no_shadows.png``: the same render with the sun's shadow turned off;
+- ``viewport.json``: window size, the camera frame rectangle in window pixels (origin at the
+  window's bottom-left, as Blender counts), timings, the number of viewport draws and mesh
+  uploads, and ``error`` (None on success).
+
+Everything runs from ``bpy.app.timers`` callbacks, because a ``-P`` script runs before the
+window has drawn once. The process exits with ``os._exit`` so no quit dialog can block it.
+"""
+
+import json
+import os
+import sys
+import time
+import traceback
+
+import bpy
+
+# Never hard-code the clone's location: tests/hosts/gui_driver.py -> repository root.
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+OUT_DIR = os.path.abspath(sys.argv[sys.argv.index("--") + 1]) if "--" in sys.argv else os.getcwd()
+SCENE_FILE = os.path.join(REPO, "data", "scenes", "default.json")
+
+TICK_S = 0.05               # timer period while waiting for Blender to draw
+DRAWS_AFTER_SETUP = 1       # complete viewport draws to wait for after the last view change
+# Blender's camera zoom steps; a little smaller than "fit" keeps the camera frame clear of
+# the region's edge widgets (the arrows that reopen the toolbar and sidebar).
+CAMERA_ZOOM_OUT = 3.0
+FRAME_MARGIN_PX = 12        # the frame must stay this far inside the viewport region
+WAIT_LIMIT_S = 60.0         # give up (and say why) if the engine never draws
+VIEWPORT_ASPECT = (16, 9)   # camera frame aspect while the viewport is captured
+
+sys.dont_write_bytecode = True   # no __pycache__ in the checkout
+if REPO not in sys.path:
+    sys.path.insert(0, REPO)
+
+STATE = {"started": time.monotonic(), "step": "setup", "draws": 0, "draws_at_mark": 0,
+         "window": None, "area": None, "region": None}
+REPORT = {"error": None, "blender": bpy.app.version_string, "timings_s": {}}
+
+
+def log(message):
+    print(f"gui_driver: {time.monotonic() - STATE['started']:6.2f} s: {message}", flush=True)
+
+
+def finish(exit_code):
+    REPORT["timings_s"]["total"] = round(time.monotonic() - STATE["started"], 3)
+    with open(os.path.join(OUT_DIR, "viewport.json"), "w") as handle:
+        json.dump(REPORT, handle, indent=2)
+    log(f"done, exit code {exit_code}")
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(exit_code)
+
+
+def count_view_draws():
+    """Wrap the engine's view_draw so the driver knows when a frame has really been drawn.
+
+    Blender looks the method up on the class at every call, so wrapping it after
+    registration takes effect for the engine instance the viewport creates."""
+    from csm_engine import engine
+    original = engine.CSMRenderEngine.view_draw
+
+    def view_draw(self, context, depsgraph):
+        original(self, context, depsgraph)
+        STATE["draws"] += 1
+
+    engine.CSMRenderEngine.view_draw = view_draw
+
+
+def empty_startup_scene():
+    """Remove the startup file's cube, light, camera and world, as the command line's
+    ``read_factory_settings(use_empty=True)`` does, so the viewport shows what the CLI renders."""
+    for collection in (bpy.data.objects, bpy.data.meshes, bpy.data.materials, bpy.data.lights,
+                       bpy.data.cameras, bpy.data.worlds):
+        for datablock in list(collection):
+            collection.remove(datablock)
+
+
+def biggest_view3d(window):
+    areas = [a for a in window.screen.areas if a.type == 'VIEW_3D']
+    if not areas:
+        raise RuntimeError("the startup screen has no 3D viewport")
+    area = max(areas, key=lambda a: a.width * a.height)
+    region = next(r for r in area.regions if r.type == 'WINDOW')
+    return area, region
+
+
+def setup():
+    import numpy  # TEMP-DEV-SHIM
+    if not hasattr(numpy, 'bool'): numpy.bool = bool  # TEMP-DEV-SHIM
+    import csm_engine
+    from csm_engine import scene_builder
+    csm_engine.register()
+    count_view_draws()
+
+    empty_startup_scene()
+    scene = bpy.context.scene
+    scene_builder.import_scene_file(SCENE_FILE, scene)
+    render = scene.render
+    render.engine = 'CSM'
+    render.resolution_x, render.resolution_y = 1600, 1600 * VIEWPORT_ASPECT[1] // VIEWPORT_ASPECT[0]
+    render.resolution_percentage = 100
+    render.image_settings.file_format = 'PNG'
+    render.image_settings.color_mode = 'RGB'
+    render.image_settings.color_depth = '8'
+    # Dither adds per-pixel noise to both the display and the saved render: off, so the two
+    # images differ only where the pipeline does.
+    render.dither_intensity = 0.0
+    scene.view_settings.view_transform = 'Standard'
+    scene.view_settings.look = 'None'
+    scene.view_settings.exposure = 0.0
+    scene.view_settings.gamma = 1.0
+
+    window = bpy.context.window_manager.windows[0]
+    area, region = biggest_view3d(window)
+    space = area.spaces.active
+    space.shading.type = 'RENDERED'
+    space.overlay.show_overlays = False
+    space.show_gizmo = False
+    space.show_region_toolbar = False
+    space.show_region_ui = False
+    # The tool settings bar is drawn over the top of the region, inside the camera frame.
+    space.show_region_tool_header = False
+    region_3d = space.region_3d
+    region_3d.view_perspective = 'CAMERA'
+    with bpy.context.temp_override(window=window, area=area, region=region):
+        bpy.ops.view3d.view_center_camera()
+    region_3d.view_camera_zoom -= CAMERA_ZOOM_OUT
+    # Show the engine's own settings next to the viewport in the screenshot.
+    for other in window.screen.areas:
+        if other.type == 'PROPERTIES':
+            other.spaces.active.context = 'RENDER'
+    STATE.update(window=window, area=area, region=region)
+    REPORT["scene_file"] = SCENE_FILE
+    REPORT["objects"] = sorted(o.name for o in scene.objects)
+
+
+def camera_frame_in_window(scene, region, region_3d):
+    """The camera frame's corners projected into window pixels (bottom-left origin)."""
+    from bpy_extras.view3d_utils import location_3d_to_region_2d
+    camera = scene.camera
+    corners = [camera.matrix_world @ corner for corner in camera.data.view_frame(scene=scene)]
+    points = [location_3d_to_region_2d(region, region_3d, corner) for corner in corners]
+    if any(p is None for p in points):
+        raise RuntimeError("the camera frame is behind the viewport camera")
+    xs = [region.x + p.x for p in points]
+    ys = [region.y + p.y for p in points]
+    return {"x_min": min(xs), "x_max": max(xs), "y_min": min(ys), "y_max": max(ys)}
+
+
+def capture():
+    window, area, region = STATE["window"], STATE["area"], STATE["region"]
+    scene = bpy.context.scene
+    shot = os.path.join(OUT_DIR, "viewport.png")
+    with bpy.context.temp_override(window=window, area=area, region=region):
+        bpy.ops.screen.screenshot(filepath=shot, check_existing=False)
+    if not os.path.isfile(shot):
+        raise RuntimeError(f"screen.screenshot did not write {shot}")
+    frame = camera_frame_in_window(scene, region, area.spaces.active.region_3d)
+    inside = (frame["x_min"] - region.x, region.x + region.width - frame["x_max"],
+              frame["y_min"] - region.y, region.y + region.height - frame["y_max"])
+    if min(inside) < FRAME_MARGIN_PX:
+        raise RuntimeError(f"camera frame {frame} is not {FRAME_MARGIN_PX} px inside the "
+                           f"viewport region {region.x, region.y, region.width, region.height}")
+    REPORT.update(window_size=[window.width, window.height],
+                  viewport_region={"x": region.x, "y": region.y,
+                                   "width": region.width, "height": region.height},
+                  camera_frame=frame, viewport_draws=STATE["draws"])
+
+
+def render_still():
+    """F12 at the on-screen size of the camera frame, so the comparison resamples little."""
+    scene = bpy.context.scene
+    frame = REPORT["camera_frame"]
+    width = max(int(round(frame["x_max"] - frame["x_min"])), 16)
+    render = scene.render
+    render.resolution_x = width
+    render.resolution_y = max(int(round(width * VIEWPORT_ASPECT[1] / VIEWPORT_ASPECT[0])), 9)
+    render.filepath = os.path.join(OUT_DIR, "render.png")
+    started = time.monotonic()
+    bpy.ops.render.render(write_still=True)
+    REPORT["timings_s"]["render"] = round(time.monotonic() - started, 3)
+    from csm_engine import engine
+    if engine.LAST_RENDER["error"]:
+        raise RuntimeError("CSM render failed: " + engine.LAST_RENDER["error"])
+    if not os.path.isfile(render.filepath):
+        raise RuntimeError(f"render.render(write_still=True) did not write {render.filepath}")
+    REPORT["render_size"] = [render.resolution_x, render.resolution_y]
+
+    # The same frame without sun shadows: the test's control that a viewport missing the
+    # shadows would not pass for the CSM render.
+    for obj in scene.objects:
+        if obj.type == 'LIGHT':
+            obj.data.use_shadow = False
+    render.filepath = os.path.join(OUT_DIR, "render_no_shadows.png")
+    bpy.ops.render.render(write_still=True)
+    if engine.LAST_RENDER["error"] or not os.path.isfile(render.filepath):
+        raise RuntimeError(f"the render without shadows failed: {engine.LAST_RENDER['error']}")
+
+
+def tick():
+    try:
+        step = STATE["step"]
+        elapsed = time.monotonic() - STATE["started"]
+        if elapsed > WAIT_LIMIT_S:
+            raise RuntimeError(f"gave up in step '{step}' after {elapsed:.0f} s: "
+                               f"{STATE['draws']} viewport draws seen")
+        if step == "setup":
+            setup()
+            REPORT["timings_s"]["setup"] = round(time.monotonic() - STATE["started"], 3)
+            log("scene imported, viewport in CSM rendered mode")
+            STATE["step"] = "first_draw"
+        elif step == "first_draw":
+            from csm_engine import mesh_cache
+            if STATE["draws"] > 0 and mesh_cache.UPLOADS["count"] > 0:
+                REPORT["mesh_uploads"] = mesh_cache.UPLOADS["count"]
+                REPORT["timings_s"]["first_draw"] = round(elapsed, 3)
+                log(f"engine drew ({mesh_cache.UPLOADS['count']} mesh uploads)")
+                # Whatever the first draw saw, ask for fresh ones with the final view.
+                STATE["draws_at_mark"] = STATE["draws"]
+                STATE["area"].tag_redraw()
+                STATE["step"] = "settle"
+        elif step == "settle":
+            if STATE["draws"] - STATE["draws_at_mark"] >= DRAWS_AFTER_SETUP:
+                # This timer runs after the window was swapped, so the screenshot holds the
+                # last complete draw.
+                capture()
+                log(f"screenshot taken after {STATE['draws']} viewport draws")
+                render_still()
+                log("F12 render written")
+                finish(0)
+            else:
+                STATE["area"].tag_redraw()
+        return TICK_S
+    except Exception:
+        REPORT["error"] = traceback.format_exc()
+        print(REPORT["error"], file=sys.stderr, flush=True)
+        finish(1)
+
+
+os.makedirs(OUT_DIR, exist_ok=True)
+bpy.app.timers.register(tick, first_interval=TICK_S)

@@ -1,0 +1,392 @@
+"""The two archives from tools/build.py install and work the way a user would use them.
+
+* The extension zip passes Blender's own validator, then installs through
+  ``extensions.package_install_files`` and enables in pip bpy 5.0 and pip bpy 4.2: CSM is
+  then a render engine a scene can use, and it renders a lit cube from the installed copy.
+* The legacy zip installs through ``preferences.addon_install`` + ``addon_enable`` in
+  Debian's Blender 3.4, and ``blender -b file.blend -E CSM -f 1`` renders the default
+  scene with the add-on enabled from the saved preferences.
+
+Each host runs in its own subprocess with throwaway Blender user folders and a working
+directory outside the checkout, so what runs is the installed archive. The archives are
+built fresh into a temporary folder by the same command as ``./dev build``.
+"""
+
+import os
+import shutil
+import subprocess
+import sys
+import tomllib
+import zipfile
+
+import numpy as np
+import pytest
+
+pytestmark = pytest.mark.hosts
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+BUILD_SCRIPT = os.path.join(REPO, "tools", "build.py")
+RENDER_SIZE = (160, 120)
+# A pixel counts as lit when the sun adds at least this much to its luminance (0..1 PNG).
+LIT_THRESHOLD = 0.05
+# The smallest share of the frame that must be lit by the sun: a cube or a landscape
+# in view covers far more; an engine that draws nothing covers none.
+MIN_LIT_FRACTION = 0.01
+
+
+def _manifest():
+    with open(os.path.join(REPO, "blender_manifest.toml"), "rb") as handle:
+        return tomllib.load(handle)
+
+
+def _run_build(repo_root, dist_dir):
+    return subprocess.run([sys.executable, os.path.join(repo_root, "tools", "build.py"),
+                           "--dist", dist_dir], capture_output=True, text=True, timeout=300,
+                          stdin=subprocess.DEVNULL)
+
+
+@pytest.fixture(scope="session")
+def archives(tmp_path_factory):
+    """(extension zip, legacy zip) built from this checkout by tools/build.py."""
+    dist_dir = str(tmp_path_factory.mktemp("dist"))
+    result = _run_build(REPO, dist_dir)
+    assert result.returncode == 0, f"tools/build.py failed:\n{result.stdout}{result.stderr}"
+    version = _manifest()["version"]
+    extension = os.path.join(dist_dir, f"csm_engine-{version}.zip")
+    legacy = os.path.join(dist_dir, f"csm_engine-{version}-legacy.zip")
+    for path in (extension, legacy):
+        assert os.path.isfile(path), f"tools/build.py did not write {path}"
+        assert path in result.stdout, f"tools/build.py did not print {path}:\n{result.stdout}"
+    return extension, legacy
+
+
+def _source_files():
+    """What both archives must carry, relative to the package folder."""
+    files = set()
+    for name in os.listdir(os.path.join(REPO, "csm_engine")):
+        if name.endswith(".py"):
+            files.add(name)
+    for resource in ("shaders", "data"):
+        for folder, dirs, names in os.walk(os.path.join(REPO, resource)):
+            dirs[:] = [d for d in dirs if d != "__pycache__" and not d.startswith(".")]
+            for name in names:
+                if not name.startswith(".") and not name.endswith((".pyc", "~")):
+                    files.add(os.path.relpath(os.path.join(folder, name), REPO).replace(os.sep, "/"))
+    return files
+
+
+# --- the archives themselves -------------------------------------------------------------
+
+def test_extension_zip_has_the_package_at_its_root_with_shaders_and_data(archives):
+    names = set(zipfile.ZipFile(archives[0]).namelist())
+    missing = _source_files() - names
+    assert not missing, f"extension zip lacks {sorted(missing)}"
+    assert "blender_manifest.toml" in names
+    assert "scenes/default.json" not in names and "data/scenes/default.json" in names
+    stray = [n for n in names if "__pycache__" in n or n.endswith(".pyc") or n.startswith("tests/")]
+    assert not stray, f"extension zip carries build droppings: {stray}"
+
+
+def test_legacy_zip_is_one_csm_engine_folder_with_shaders_and_data(archives):
+    names = set(zipfile.ZipFile(archives[1]).namelist())
+    expected = {"csm_engine/" + name for name in _source_files()}
+    missing = expected - names
+    assert not missing, f"legacy zip lacks {sorted(missing)}"
+    outside = [n for n in names if not n.startswith("csm_engine/")]
+    assert not outside, f"legacy zip has files outside csm_engine/: {outside}"
+    stray = [n for n in names if "__pycache__" in n or n.endswith(".pyc")]
+    assert not stray, f"legacy zip carries build droppings: {stray}"
+
+
+def test_manifest_and_bl_info_agree(archives):
+    manifest = _manifest()
+    with zipfile.ZipFile(archives[0]) as bundle:
+        built = tomllib.loads(bundle.read("blender_manifest.toml").decode())
+    assert built == manifest
+    assert manifest["id"] == "csm_engine" and manifest["type"] == "add-on"
+    assert manifest["blender_version_min"] == "4.2.0"
+    assert manifest["license"] == ["SPDX:GPL-3.0-or-later"]
+    # The file permission only: a scene file is data and never needs network or more.
+    assert set(manifest["permissions"]) == {"files"}
+    import ast
+    with open(os.path.join(REPO, "csm_engine", "__init__.py"), encoding="utf-8") as handle:
+        tree = ast.parse(handle.read())
+    bl_info = next(ast.literal_eval(node.value) for node in tree.body
+                   if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "bl_info")
+    assert ".".join(map(str, bl_info["version"])) == manifest["version"]
+    assert tuple(bl_info["blender"]) <= (3, 4, 0)
+
+
+def test_extension_zip_passes_blenders_validator(archives, hosts):
+    tool = hosts.extension_tool()
+    tags = os.path.join(tool.split(os.sep + "scripts" + os.sep)[0], "scripts", "modules",
+                        "_bpy_internal", "extensions", "tags.py")
+    result = subprocess.run([sys.executable, tool, "validate", archives[0], "--valid-tags", tags],
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, f"validator rejected {archives[0]}:\n{result.stdout}{result.stderr}"
+    assert "Success" in result.stdout or result.stdout.strip() == "", result.stdout
+
+
+def _copy_checkout(target):
+    """The parts of the checkout that tools/build.py reads, in a folder of another name."""
+    for name in ("tools", "csm_engine", "shaders", "data"):
+        shutil.copytree(os.path.join(REPO, name), os.path.join(target, name),
+                        ignore=shutil.ignore_patterns("__pycache__"))
+    for name in ("blender_manifest.toml", "LICENSE"):
+        if os.path.isfile(os.path.join(REPO, name)):
+            shutil.copy2(os.path.join(REPO, name), target)
+
+
+def test_build_works_from_any_folder_name_and_gives_the_same_archives(archives, tmp_path):
+    clone = tmp_path / "some other clone name"
+    _copy_checkout(str(clone))
+    result = _run_build(str(clone), str(clone / "dist"))
+    assert result.returncode == 0, result.stdout + result.stderr
+    for original in archives:
+        copy = clone / "dist" / os.path.basename(original)
+        with zipfile.ZipFile(original) as a, zipfile.ZipFile(copy) as b:
+            assert sorted(a.namelist()) == sorted(b.namelist())
+            for name in a.namelist():
+                assert a.read(name) == b.read(name), f"{name} differs between builds"
+
+
+def test_build_refuses_a_manifest_blender_would_reject_with_one_clear_line(tmp_path):
+    clone = tmp_path / "broken"
+    _copy_checkout(str(clone))
+    manifest = (clone / "blender_manifest.toml").read_text()
+    # Blender requires the tagline to end without punctuation.
+    broken = manifest.replace(f'tagline = "{_manifest()["tagline"]}"',
+                              f'tagline = "{_manifest()["tagline"]}."')
+    assert broken != manifest
+    (clone / "blender_manifest.toml").write_text(broken)
+    result = _run_build(str(clone), str(clone / "dist"))
+    assert result.returncode == 1
+    assert "tagline" in result.stderr and "Traceback" not in result.stderr, result.stderr
+    assert not (clone / "dist" / "csm_engine-0.1.0-legacy.zip").exists()
+
+
+# --- pip bpy hosts: install the extension and render with it -----------------------------
+
+# Runs inside the host. argv: extension zip, output PNG folder. Prints one CSM_RESULT line.
+EXTENSION_HOST_SCRIPT = r'''
+import json, math, os, sys
+import bpy
+
+zip_path, out_dir = sys.argv[1], sys.argv[2]
+result = {"blender": bpy.app.version_string}
+try:
+    result["install"] = sorted(bpy.ops.extensions.package_install_files(
+        repo="user_default", filepath=zip_path, enable_on_install=True))
+except Exception as error:  # reported to the test, which fails with the message
+    result["install_error"] = str(error)
+result["addons"] = sorted(bpy.context.preferences.addons.keys())
+result["engines"] = {
+    getattr(cls, "bl_idname", ""): {"module": cls.__module__, "label": getattr(cls, "bl_label", ""),
+                                     "use_gpu_context": getattr(cls, "bl_use_gpu_context", None)}
+    for cls in bpy.types.RenderEngine.__subclasses__()}
+package = sys.modules.get("bl_ext.user_default.csm_engine")
+result["package_file"] = getattr(package, "__file__", None)
+if package is not None:
+    paths = sys.modules[package.__name__ + ".paths"]
+    result["shaders_dir"] = paths.shaders_dir()
+    result["default_scene"] = paths.default_scene_path()
+
+def make_scene(with_sun):
+    # Objects are removed by hand: reading factory settings would also reset the
+    # preferences and so disable the extension just installed.
+    for obj in list(bpy.data.objects):
+        bpy.data.objects.remove(obj)
+    scene = bpy.context.scene
+    scene.render.engine = "CSM"
+    scene.world = bpy.data.worlds.new("Black")
+    scene.world.color = (0.0, 0.0, 0.0)
+    scene.view_settings.view_transform = "Standard"
+    scene.render.resolution_x, scene.render.resolution_y = %(width)d, %(height)d
+    scene.render.resolution_percentage = 100
+    scene.render.film_transparent = False
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.image_settings.color_mode = "RGB"
+    bpy.ops.mesh.primitive_cube_add(size=2.0)
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    camera.location = (5.0, -5.0, 4.0)
+    camera.rotation_euler = (math.radians(60), 0.0, math.radians(45))
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    if with_sun:
+        sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+        sun.data.energy = 3.0
+        sun.rotation_euler = (math.radians(40), math.radians(20), math.radians(30))
+        scene.collection.objects.link(sun)
+    return scene
+
+try:
+    scene = make_scene(with_sun=True)
+    result["scene_engine"] = scene.render.engine
+    for name, with_sun in (("lit", True), ("unlit", False)):
+        scene = make_scene(with_sun)
+        scene.render.filepath = os.path.join(out_dir, name + ".png")
+        bpy.ops.render.render(write_still=True)
+        result[name + "_png"] = scene.render.filepath
+except Exception as error:
+    result["render_error"] = "%%s: %%s" %% (type(error).__name__, error)
+print("CSM_RESULT " + json.dumps(result), flush=True)
+''' % {"width": RENDER_SIZE[0], "height": RENDER_SIZE[1]}
+
+
+def _assert_sun_lights_the_frame(lit_png, unlit_png, hosts, what):
+    lit, unlit = hosts.read_png(lit_png), hosts.read_png(unlit_png)
+    assert lit.shape[:2] == (RENDER_SIZE[1], RENDER_SIZE[0]), f"{what}: {lit_png} is {lit.shape}"
+    gain = hosts.luminance(lit) - hosts.luminance(unlit)
+    lit_fraction = float(np.mean(gain > LIT_THRESHOLD))
+    assert lit_fraction >= MIN_LIT_FRACTION, (
+        f"{what}: the sun lights only {lit_fraction:.2%} of the frame (max gain "
+        f"{gain.max():.3f}); expected a lit object in view")
+
+
+def _install_extension_and_render(python, archives, host_dir, hosts, what):
+    script = host_dir / "host_script.py"
+    script.write_text(EXTENSION_HOST_SCRIPT)
+    out_dir = host_dir / "renders"
+    out_dir.mkdir()
+    env = hosts.user_dirs_env(str(host_dir))
+    run = hosts.run_host([python, str(script), archives[0], str(out_dir)], env, str(host_dir))
+    result = run.result
+    assert run.returncode == 0 and result, f"{what} host failed\n{run.describe()}"
+    assert "install_error" not in result, f"{what}: install failed: {result['install_error']}\n{run.describe()}"
+    assert result["install"] == ["FINISHED"], result
+    assert "bl_ext.user_default.csm_engine" in result["addons"], result["addons"]
+    engine = result["engines"].get("CSM")
+    assert engine, f"{what}: no CSM render engine after install; engines: {result['engines']}"
+    assert engine["label"] == "CSM" and engine["use_gpu_context"] is True, engine
+    assert engine["module"].startswith("bl_ext.user_default.csm_engine"), engine
+    # The code, shaders and scenes that run are the installed ones, in the throwaway folders.
+    user_root = str(host_dir / "blender-user")
+    for key in ("package_file", "shaders_dir", "default_scene"):
+        assert result.get(key, "").startswith(user_root), f"{what}: {key} = {result.get(key)}"
+    assert os.path.isfile(result["default_scene"])
+    assert "render_error" not in result, f"{what}: render failed: {result['render_error']}\n{run.describe()}"
+    assert result["scene_engine"] == "CSM"
+    _assert_sun_lights_the_frame(result["lit_png"], result["unlit_png"], hosts, what)
+    return result
+
+
+def test_extension_installs_enables_and_renders_in_pip_bpy_5_0(archives, host_dir, hosts):
+    result = _install_extension_and_render(hosts.bpy50_python(), archives, host_dir, hosts,
+                                           "pip bpy 5.0")
+    assert result["blender"].startswith("5.0"), result["blender"]
+
+
+def test_extension_installs_enables_and_renders_in_pip_bpy_4_2(archives, host_dir, hosts):
+    result = _install_extension_and_render(hosts.bpy42_python(), archives, host_dir, hosts,
+                                           "pip bpy 4.2")
+    assert result["blender"].startswith("4.2"), result["blender"]
+
+
+# --- Debian Blender 3.4: legacy zip, saved preferences, command-line render ---------------
+
+# Runs inside `blender -b --factory-startup --python`. argv after "--": legacy zip, folder for
+# the .blend files. Installs and enables like Preferences > Add-ons > Install, saves the
+# preferences, then saves the default scene with and without its sun.
+LEGACY_HOST_SCRIPT = r'''
+import json, os, sys
+import bpy
+
+zip_path, out_dir = sys.argv[sys.argv.index("--") + 1:][:2]
+result = {"blender": bpy.app.version_string}
+result["install"] = sorted(bpy.ops.preferences.addon_install(filepath=zip_path))
+result["enable"] = sorted(bpy.ops.preferences.addon_enable(module="csm_engine"))
+result["addons"] = sorted(bpy.context.preferences.addons.keys())
+package = sys.modules.get("csm_engine")
+result["package_file"] = getattr(package, "__file__", None)
+result["engines"] = {getattr(cls, "bl_idname", ""): cls.__module__
+                     for cls in bpy.types.RenderEngine.__subclasses__()}
+try:
+    bpy.context.scene.render.engine = "CSM"
+    result["scene_engine"] = bpy.context.scene.render.engine
+except TypeError as error:
+    result["scene_engine_error"] = str(error)
+result["save_userpref"] = sorted(bpy.ops.wm.save_userpref())
+
+# The user's flow: File > Import > CSM Scene of the shipped default scene.
+def save_default_scene():
+    from csm_engine import paths
+    # Objects are removed by hand: reading factory settings would also reset the
+    # preferences and so disable the add-on just enabled.
+    for obj in list(bpy.data.objects):
+        bpy.data.objects.remove(obj)
+    result["import"] = sorted(bpy.ops.csm.import_scene(filepath=paths.default_scene_path()))
+    scene = bpy.context.scene
+    result["has_camera"] = scene.camera is not None
+    scene.render.resolution_x, scene.render.resolution_y = %(width)d, %(height)d
+    scene.render.resolution_percentage = 100
+    scene.render.film_transparent = False
+    scene.render.image_settings.file_format = "PNG"
+    scene.render.image_settings.color_mode = "RGB"
+    scene.view_settings.view_transform = "Standard"
+    # Saved with another engine so that `-E CSM` on the command line is what selects CSM.
+    scene.render.engine = "BLENDER_WORKBENCH"
+    scene.render.filepath = "//render_"
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.join(out_dir, "lit", "scene.blend"))
+    suns = [o for o in scene.objects if o.type == "LIGHT" and o.data.type == "SUN"]
+    result["suns"] = len(suns)
+    for sun in suns:
+        bpy.data.objects.remove(sun)
+    bpy.ops.wm.save_as_mainfile(filepath=os.path.join(out_dir, "unlit", "scene.blend"))
+
+try:
+    save_default_scene()
+except Exception:
+    import traceback
+    result["scene_error"] = traceback.format_exc()
+print("CSM_RESULT " + json.dumps(result), flush=True)
+''' % {"width": RENDER_SIZE[0], "height": RENDER_SIZE[1]}
+
+
+@pytest.fixture(scope="module")
+def legacy_install(archives, hosts, tmp_path_factory):
+    """Blender 3.4 with the legacy zip installed and enabled in saved preferences, plus the
+    default scene saved as lit/scene.blend and unlit/scene.blend (sun removed). Shared by
+    the tests below: installing once is what a user does, too."""
+    blender = hosts.blender_binary()
+    host_dir = tmp_path_factory.mktemp("blender34")
+    script = host_dir / "legacy_host.py"
+    script.write_text(LEGACY_HOST_SCRIPT)
+    for name in ("lit", "unlit"):
+        (host_dir / name).mkdir()
+    env = hosts.user_dirs_env(str(host_dir))
+    run = hosts.run_host([blender, "-b", "--factory-startup", "--python-exit-code", "1",
+                          "--python", str(script), "--", archives[1], str(host_dir)],
+                         env, str(host_dir))
+    assert run.returncode == 0 and run.result, f"Blender 3.4 host script failed\n{run.describe()}"
+    return blender, env, run, host_dir
+
+
+def test_legacy_zip_installs_and_enables_in_blender_3_4(legacy_install):
+    _, _, run, host_dir = legacy_install
+    result = run.result
+    assert result["blender"].startswith("3.4"), f"expected Debian's Blender 3.4, got {result['blender']}"
+    assert result["install"] == ["FINISHED"] and result["enable"] == ["FINISHED"], run.describe()
+    assert "csm_engine" in result["addons"], result["addons"]
+    assert result["package_file"].startswith(str(host_dir / "blender-user" / "scripts")), result
+    assert result["engines"].get("CSM", "").startswith("csm_engine"), result["engines"]
+    assert result.get("scene_engine") == "CSM", result.get("scene_engine_error")
+    assert result["save_userpref"] == ["FINISHED"]
+
+
+def test_blender_3_4_command_line_render_with_csm(legacy_install, hosts):
+    blender, env, run, host_dir = legacy_install
+    result = run.result
+    assert "scene_error" not in result, (
+        f"importing the default scene in Blender 3.4 failed:\n{result['scene_error']}")
+    assert result["import"] == ["FINISHED"] and result["has_camera"], result
+    assert result["suns"] >= 1, "the default scene should have a sun"
+    pngs = {}
+    for name in ("lit", "unlit"):
+        blend = str(host_dir / name / "scene.blend")
+        command = [blender, "-b", blend, "-E", "CSM", "-f", "1"]
+        run = hosts.run_host(command, env, str(host_dir))
+        png = host_dir / name / "render_0001.png"
+        assert run.returncode == 0 and png.is_file(), f"render failed or wrote no {png}\n{run.describe()}"
+        assert "Traceback" not in run.output, run.describe()
+        pngs[name] = str(png)
+    _assert_sun_lights_the_frame(pngs["lit"], pngs["unlit"], hosts, "Blender 3.4 -E CSM")
