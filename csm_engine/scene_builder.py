@@ -267,6 +267,7 @@ class _SceneState:
         self.scene = scene
         self.view_layer = view_layer
         self.camera = scene.camera
+        self.world = scene.world
         self.active_collection = view_layer.active_layer_collection.collection
         self.active_collection_pointer = self.active_collection.as_pointer()
         self.active_object = view_layer.objects.active
@@ -281,6 +282,8 @@ class _SceneState:
 
     def restore(self):
         self.scene.camera = self.camera
+        if self.scene.world is not self.world:
+            self.scene.world = self.world
         self.restore_active_collection()
         for obj in self.view_layer.objects:
             obj.select_set(False, view_layer=self.view_layer)
@@ -432,7 +435,7 @@ def _importer_reason(err):
     return type(err).__name__
 
 
-def _import_mesh(planned, collection, view_layer, scene_path):
+def _import_mesh(planned, collection, scene_path):
     """Run one importer; return the parent empty carrying the file's object transform."""
     item = planned.scene_object
     stem = os.path.splitext(os.path.basename(planned.mesh_path))[0]
@@ -507,7 +510,7 @@ def _add_sun(light, collection, bounds, name):
     return obj
 
 
-def _add_point_light(index, light, collection, name):
+def _add_point_light(light, collection, name):
     data = bpy.data.lights.new(name, 'POINT')
     data.color = light.color.as_tuple()
     data.energy = POINT_LIGHT_WATTS
@@ -566,6 +569,23 @@ def _override_for(scene):
     return bpy.context.temp_override(scene=scene, view_layer=view_layer), view_layer
 
 
+# Course files carry no ambient term (students hard-coded ~0.02). A scene without a World
+# gets a soft sky: its colour is CSM's ambient light and the background.
+DEFAULT_SKY_COLOR = (0.12, 0.16, 0.22)
+
+
+def _ensure_world(scene):
+    if scene.world is not None:
+        return      # the user's own World (and ambient) stays as it is
+    world = bpy.data.worlds.new("CSM Sky")
+    world.color = DEFAULT_SKY_COLOR
+    if world.node_tree is not None:
+        for node in world.node_tree.nodes:
+            if node.type == 'BACKGROUND':
+                node.inputs[0].default_value = (*DEFAULT_SKY_COLOR, 1.0)
+    scene.world = world
+
+
 def _build(description, planned, scene, view_layer, scene_path, name):
     collection = bpy.data.collections.new(name)
     scene.collection.children.link(collection)
@@ -573,7 +593,7 @@ def _build(description, planned, scene, view_layer, scene_path, name):
     for obj in view_layer.objects:
         obj.select_set(False, view_layer=view_layer)
 
-    parents = [_import_mesh(item, collection, view_layer, scene_path) for item in planned]
+    parents = [_import_mesh(item, collection, scene_path) for item in planned]
     view_layer.update()
     bounds = _mesh_bounds(collection.all_objects)
     if bounds is None:
@@ -584,12 +604,13 @@ def _build(description, planned, scene, view_layer, scene_path, name):
         collection["csm_sun_direction"] = [float(v) for v in conventions.direction_zup_from_yup(
             description.directional_light.direction.as_tuple())]
     for index, light in enumerate(description.lights):
-        _add_point_light(index, light, collection, f"Point light {index + 1}")
+        _add_point_light(light, collection, f"Point light {index + 1}")
     if description.camera is not None:
         camera = _add_camera(description.camera, collection, "Camera")
     else:
         camera = _add_default_camera(collection, bounds, "Camera (default view)")
     scene.camera = camera
+    _ensure_world(scene)
 
     for obj in collection.all_objects:
         if obj.name in view_layer.objects:

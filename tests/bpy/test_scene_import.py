@@ -9,7 +9,6 @@ while leaving the Blender scene exactly as it was.
 import json
 import math
 import os
-import shutil
 import struct
 
 import bpy
@@ -374,6 +373,7 @@ def test_translation_variant(scene, workdir):
     collection = scene_builder.import_scene_file(write_scene(str(workdir), "t.json", text))
     parent = objects_of(collection, 'EMPTY')[0]
     assert np.allclose(parent.matrix_world.translation, (25, 0, 0))
+    assert_camera_sees_content(scene, collection)
 
 
 def test_no_lights_and_no_directional_light(scene, workdir):
@@ -384,6 +384,7 @@ def test_no_lights_and_no_directional_light(scene, workdir):
     collection = scene_builder.import_scene_file(write_scene(str(workdir), "dark.json", document))
     assert objects_of(collection, 'LIGHT') == []
     assert "csm_sun_direction" not in collection
+    assert_camera_sees_content(scene, collection)
 
 
 def test_no_camera_makes_a_default_view_of_the_content(scene, workdir):
@@ -402,6 +403,15 @@ def test_no_camera_makes_a_default_view_of_the_content(scene, workdir):
         x, y, depth = world_to_camera_view(scene, scene.camera, bpy_vector(corner))
         assert 0 <= x <= 1 and 0 <= y <= 1
         assert scene.camera.data.clip_start < depth < scene.camera.data.clip_end
+
+
+def test_import_into_a_scene_that_is_not_the_active_one(scene):
+    other = bpy.data.scenes.new("Other")
+    collection = scene_builder.import_scene_file(os.path.join(SCENES, "shadow_test.json"), other)
+    assert collection.name in other.collection.children
+    assert collection.name not in scene.collection.children
+    assert len(other.objects) == 43 and len(scene.objects) == 0
+    assert other.camera is not None and scene.camera is None
 
 
 # ----------------------------------------------------------------- transforms
@@ -453,7 +463,8 @@ def test_every_mesh_type_is_read_as_y_up(scene, workdir, extension, writer):
 def test_reimport_replaces_the_previous_import(scene, workdir):
     def counts():
         return {kind: len(getattr(bpy.data, kind)) for kind in
-                ("objects", "meshes", "materials", "images", "cameras", "lights", "collections")}
+                ("objects", "meshes", "materials", "images", "cameras", "lights", "collections",
+                 "node_groups", "textures", "worlds")}
 
     path = os.path.join(SCENES, "default.json")
     first = scene_builder.import_scene_file(path)

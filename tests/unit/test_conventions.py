@@ -1,11 +1,9 @@
 """The file's Y-up conventions in Blender's Z-up world (pure numpy, no Blender)."""
 
 import math
-import os
 
 import numpy as np
 import pytest
-
 
 from csm_engine import conventions as cv
 

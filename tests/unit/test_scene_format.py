@@ -1,11 +1,9 @@
 """Scene file parsing: every documented variant loads; every mistake is one clear line."""
 
 import json
-import math
 import os
 
 import pytest
-
 
 from csm_engine import scene_format
 from csm_engine.scene_format import SceneFormatError, parse_scene

@@ -1,0 +1,285 @@
+"""The CSM viewport in a real Blender window: Debian's Blender 3.4 under Xvfb.
+
+Owns the GUI acceptance test of issue 2: a 3D viewport switched to CSM rendered mode,
+looking through the scene camera, shows the default scene as CSM renders it with F12.
+``gui_driver.py`` runs inside Blender and writes a full-window screenshot, the camera
+frame's rectangle in that screenshot and the F12 renders; this file starts the X server
+and Blender, then compares pixels.
+
+``CSM_UPDATE_DOCS=1`` also copies the screenshot to ``docs/images/viewport_blender34.png``.
+"""
+
+import json
+import os
+import select
+import shutil
+import subprocess
+import time
+
+import numpy as np
+import pytest
+
+pytestmark = [pytest.mark.gui, pytest.mark.slow]
+
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+DRIVER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "gui_driver.py")
+DOCS_SCREENSHOT = os.path.join(REPO, "docs", "images", "viewport_blender34.png")
+SCREEN_SIZE = (1600, 900)
+BLENDER_TIMEOUT_S = 120
+
+# How close the viewport's camera frame must be to the F12 render (RGB in 0..1).
+# Measured here (the same on every run): mean 0.0027, and 0.9% of pixels off by more than
+# 0.1. Both images come from the same pipeline through the same view transform; they differ
+# only where rasterization does: the frame sits at a fractional window position, so polygon
+# edges land on other pixels; the frame is resampled bilinearly; Blender draws the camera
+# frame's outline even with overlays off; and the viewport's cascades are fitted to the
+# whole region rather than the frame, which moves shadow edges by a texel. For scale: the
+# render shifted by 1 / 2 / 4 px gives 1.5% / 2.4% / 4.1% of pixels off, without shadows
+# 0.021 and 11%, flipped left-right 0.09 and 46%.
+MAX_MEAN_DIFFERENCE = 0.01
+PIXEL_OFF = 0.1               # a pixel is "off" when a channel differs by more than this
+MAX_FRACTION_OFF = 0.02
+
+# What the default scene must look like for the match to mean something (luminance 0..1).
+DARK = 0.03                   # black sky and sun shadows (the scene has no world: no ambient)
+LIT = 0.15
+
+
+def _fail(message):
+    pytest.fail(message, pytrace=False)
+
+
+# --- processes ----------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def x_display():
+    """A fresh Xvfb on a display number the server picks itself (-displayfd): no guessing,
+    no clash with a display in use, and no sleep: the number arrives once it accepts clients."""
+    xvfb = shutil.which("Xvfb")
+    if xvfb is None:
+        _fail("Xvfb not found: apt-get install xvfb")
+    read_end, write_end = os.pipe()
+    width, height = SCREEN_SIZE
+    server = subprocess.Popen(
+        [xvfb, "-displayfd", str(write_end), "-screen", "0", f"{width}x{height}x24",
+         "-nolisten", "tcp", "-noreset"],
+        pass_fds=[write_end], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE)
+    os.close(write_end)
+    number = b""
+    deadline = time.monotonic() + 30
+    while not number.endswith(b"\n") and time.monotonic() < deadline:
+        ready, _, _ = select.select([read_end], [], [], 0.5)
+        if ready:
+            chunk = os.read(read_end, 64)
+            if not chunk:
+                break
+            number += chunk
+    os.close(read_end)
+    if not number.strip().isdigit():
+        server.kill()
+        _fail(f"Xvfb did not start: {server.communicate()[1].decode(errors='replace')[-2000:]}")
+    try:
+        yield ":" + number.strip().decode()
+    finally:
+        server.terminate()
+        try:
+            server.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            server.kill()
+            server.wait()
+
+
+def _blender_env(hosts, root, display):
+    env = hosts.user_dirs_env(str(root))
+    env["DISPLAY"] = display
+    return env
+
+
+def _save_preferences_without_splash(blender, env, cwd):
+    """The splash screen covers the middle of the window; a throwaway userpref.blend turns it
+    off before the GUI starts (it is read only at start-up)."""
+    script = ("import bpy; bpy.context.preferences.view.show_splash = False; "
+              "bpy.ops.wm.save_userpref()")
+    done = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1",
+                           "--python-expr", script], env=env, cwd=cwd, capture_output=True,
+                          text=True, stdin=subprocess.DEVNULL, timeout=BLENDER_TIMEOUT_S)
+    prefs = os.path.join(env["BLENDER_USER_CONFIG"], "userpref.blend")
+    if done.returncode != 0 or not os.path.isfile(prefs):
+        _fail(f"could not save Blender preferences without the splash screen:\n"
+              f"{(done.stdout + done.stderr)[-3000:]}")
+
+
+class ViewportRun:
+    """What the driver recorded: paths of its images and its JSON report."""
+
+    def __init__(self, out_dir, report, output, seconds):
+        self.out_dir = out_dir
+        self.report = report
+        self.output = output
+        self.seconds = seconds
+
+    def path(self, name):
+        return os.path.join(self.out_dir, name)
+
+
+@pytest.fixture(scope="module")
+def viewport_run(x_display, hosts, tmp_path_factory):
+    """Blender 3.4's window with the default scene in CSM rendered mode, captured once."""
+    blender = hosts.blender_binary()
+    root = tmp_path_factory.mktemp("gui_viewport")
+    out_dir = root / "out"
+    out_dir.mkdir()
+    env = _blender_env(hosts, root, x_display)
+    _save_preferences_without_splash(blender, env, str(root))
+
+    width, height = SCREEN_SIZE
+    command = [blender, "--window-geometry", "0", "0", str(width), str(height),
+               "--no-window-focus", "--python", DRIVER, "--", str(out_dir)]
+    started = time.monotonic()
+    process = subprocess.Popen(command, env=env, cwd=str(root), stdin=subprocess.DEVNULL,
+                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        output, _ = process.communicate(timeout=BLENDER_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        process.kill()
+        output, _ = process.communicate()
+        _fail(f"Blender did not finish within {BLENDER_TIMEOUT_S} s:\n{output[-4000:]}")
+    seconds = time.monotonic() - started
+
+    report_path = out_dir / "viewport.json"
+    if not report_path.is_file():
+        _fail(f"the driver wrote no report (exit code {process.returncode}):\n{output[-4000:]}")
+    report = json.loads(report_path.read_text())
+    if report["error"] or process.returncode != 0:
+        _fail(f"the driver failed (exit code {process.returncode}):\n"
+              f"{report['error'] or output[-4000:]}")
+    run = ViewportRun(str(out_dir), report, output, seconds)
+    if os.environ.get("CSM_UPDATE_DOCS") == "1":
+        os.makedirs(os.path.dirname(DOCS_SCREENSHOT), exist_ok=True)
+        shutil.copyfile(run.path("viewport.png"), DOCS_SCREENSHOT)
+    return run
+
+
+# --- pixels -------------------------------------------------------------------------------
+
+def load_png(path):
+    """PNG -> float32 (height, width, 3) in 0..1, top row first, decoded by pip bpy's image
+    loader (a decoder independent of the Blender that wrote the file). Byte images give
+    their stored values: no colour management is applied to ``pixels``."""
+    import bpy
+    image = bpy.data.images.load(path, check_existing=False)
+    try:
+        width, height = image.size
+        pixels = np.empty(width * height * image.channels, np.float32)
+        image.pixels.foreach_get(pixels)
+        channels = image.channels
+    finally:
+        bpy.data.images.remove(image)
+    return pixels.reshape(height, width, channels)[::-1, :, :3]
+
+
+def camera_frame_crop(window_image, frame, size):
+    """Sample ``window_image`` inside ``frame`` (window pixels, bottom-left origin, edges as
+    continuous coordinates) at the pixel centres of a ``size`` = (width, height) image:
+    the viewport's camera view resampled onto the render's pixel grid (bilinear)."""
+    width, height = size
+    window_height = window_image.shape[0]
+    x = frame["x_min"] + (np.arange(width) + 0.5) * (frame["x_max"] - frame["x_min"]) / width
+    y = frame["y_max"] - (np.arange(height) + 0.5) * (frame["y_max"] - frame["y_min"]) / height
+    # Continuous coordinates -> array indices whose integer values are pixel centres.
+    rows = (window_height - y) - 0.5
+    cols = x - 0.5
+    row0 = np.clip(np.floor(rows).astype(int), 0, window_image.shape[0] - 2)
+    col0 = np.clip(np.floor(cols).astype(int), 0, window_image.shape[1] - 2)
+    fr = np.clip(rows - row0, 0.0, 1.0)[:, None, None]
+    fc = np.clip(cols - col0, 0.0, 1.0)[None, :, None]
+    top = window_image[row0][:, col0] * (1 - fc) + window_image[row0][:, col0 + 1] * fc
+    bottom = window_image[row0 + 1][:, col0] * (1 - fc) + window_image[row0 + 1][:, col0 + 1] * fc
+    return top * (1 - fr) + bottom * fr
+
+
+def difference(a, b):
+    """Mean absolute RGB difference and the fraction of pixels off by more than PIXEL_OFF."""
+    assert a.shape == b.shape, (a.shape, b.shape)
+    delta = np.abs(a.astype(np.float64) - b.astype(np.float64))
+    return float(delta.mean()), float((delta.max(axis=-1) > PIXEL_OFF).mean())
+
+
+def matches(a, b):
+    mean, fraction_off = difference(a, b)
+    return mean <= MAX_MEAN_DIFFERENCE and fraction_off <= MAX_FRACTION_OFF
+
+
+def luminance(rgb):
+    return rgb @ np.array([0.2126, 0.7152, 0.0722])
+
+
+@pytest.fixture(scope="module")
+def images(viewport_run):
+    render = load_png(viewport_run.path("render.png"))
+    window = load_png(viewport_run.path("viewport.png"))
+    height, width = render.shape[:2]
+    crop = camera_frame_crop(window, viewport_run.report["camera_frame"], (width, height))
+    return {"window": window, "render": render, "crop": crop,
+            "render_no_shadows": load_png(viewport_run.path("render_no_shadows.png"))}
+
+
+# --- tests --------------------------------------------------------------------------------
+
+def test_driver_ran_the_csm_viewport_in_blender_3_4(viewport_run):
+    report = viewport_run.report
+    assert report["blender"].startswith("3.4"), f"expected Debian's Blender 3.4: {report['blender']}"
+    assert report["window_size"] == list(SCREEN_SIZE), report["window_size"]
+    assert report["viewport_draws"] >= 2, report
+    assert report["mesh_uploads"] >= 1, report
+    assert report["scene_file"].endswith(os.path.join("data", "scenes", "default.json"))
+    # Blender's full-window screenshot and the frame rectangle use the same pixels.
+    window = load_png(viewport_run.path("viewport.png"))
+    assert window.shape[:2] == (SCREEN_SIZE[1], SCREEN_SIZE[0]), window.shape
+
+
+def test_viewport_shows_the_default_scene_as_csm_renders_it(viewport_run, images):
+    crop, render = images["crop"], images["render"]
+    mean, fraction_off = difference(crop, render)
+    report = viewport_run.report
+    detail = (f"mean difference {mean:.4f} (limit {MAX_MEAN_DIFFERENCE}), {fraction_off:.2%} "
+              f"of pixels off by > {PIXEL_OFF} (limit {MAX_FRACTION_OFF:.0%}); camera frame "
+              f"{report['camera_frame']}, render {report['render_size']}, images in "
+              f"{viewport_run.out_dir}")
+    assert mean <= MAX_MEAN_DIFFERENCE and fraction_off <= MAX_FRACTION_OFF, detail
+
+
+def test_viewport_picture_has_lit_and_shadowed_content(images):
+    """A match between two black (or two flat) pictures would prove nothing: the camera
+    frame must show the landscape, lit by the sun, with shadows on the ground."""
+    crop = images["crop"]
+    light = luminance(crop)
+    dark, lit = float((light < DARK).mean()), float((light > LIT).mean())
+    assert light.std() > 0.08, f"the viewport picture is nearly uniform (std {light.std():.3f})"
+    assert 0.1 < dark < 0.8 and lit > 0.2, f"dark {dark:.2%}, lit {lit:.2%}"
+    # The lower half is ground, all of it in front of the sky: dark pixels there are shadow.
+    ground = light[light.shape[0] // 2:]
+    shadow, sunlit = float((ground < DARK).mean()), float((ground > LIT).mean())
+    assert shadow > 0.05 and sunlit > 0.3, f"ground: shadow {shadow:.2%}, sunlit {sunlit:.2%}"
+    # Not grey: the landscape is green grass and brown/red blocks.
+    green = crop[..., 1] > crop[..., 0] + 0.05
+    assert green.mean() > 0.2, f"only {green.mean():.2%} of the frame is green"
+    # The shadows are the sun's: the render without them is brighter on the ground.
+    no_shadows = luminance(images["render_no_shadows"])[light.shape[0] // 2:]
+    assert no_shadows.mean() > ground.mean() + 0.02, (no_shadows.mean(), ground.mean())
+
+
+def test_comparison_rejects_pictures_that_are_not_the_render(images):
+    """The check above can fail: the same comparison rejects the render flipped upside down,
+    the viewport shifted by a few pixels, and the same frame rendered without shadows."""
+    crop, render = images["crop"], images["render"]
+    controls = {
+        "render flipped upside down": render[::-1],
+        "render flipped left-right": render[:, ::-1],
+        "render shifted 4 px right": np.roll(render, 4, axis=1),
+        "render without sun shadows": images["render_no_shadows"],
+    }
+    accepted = {name: difference(crop, image) for name, image in controls.items()
+                if matches(crop, image)}
+    assert not accepted, f"the comparison accepted pictures that differ: {accepted}"
