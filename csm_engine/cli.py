@@ -97,7 +97,7 @@ def ensure_registered():
     """Register the add-on unless Blender already has it enabled (as extension or add-on)."""
     import bpy
     if hasattr(bpy.types.Scene, "csm") and "CSM" in {
-            e.bl_idname for e in bpy.types.RenderEngine.__subclasses__()}:
+            getattr(e, "bl_idname", None) for e in bpy.types.RenderEngine.__subclasses__()}:
         return
     from . import register
     register()

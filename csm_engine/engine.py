@@ -170,7 +170,7 @@ def _compatible_panels():
     excluded = {"VIEWLAYER_PT_filter", "VIEWLAYER_PT_layer_passes"}
     for panel in bpy.types.Panel.__subclasses__():
         engines = getattr(panel, "COMPAT_ENGINES", None)
-        if engines is None or panel.__name__ in excluded:
+        if engines is None or panel.__name__ in excluded or "lightprobe" in panel.__name__:
             continue
         if "BLENDER_RENDER" in engines or panel.__name__ in wanted_eevee:
             yield panel

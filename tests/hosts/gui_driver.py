@@ -81,7 +81,8 @@ def count_view_draws():
 
 def empty_startup_scene():
     """Remove the startup file's cube, light, camera and world, as the command line's
-    ``read_factory_settings(use_empty=True)`` does, so the viewport shows what the CLI renders."""
+    ``read_factory_settings(use_empty=True)`` does, so the viewport shows what the CLI renders
+    (the import then gives the scene its own sky)."""
     for collection in (bpy.data.objects, bpy.data.meshes, bpy.data.materials, bpy.data.lights,
                        bpy.data.cameras, bpy.data.worlds):
         for datablock in list(collection):
@@ -98,8 +99,6 @@ def biggest_view3d(window):
 
 
 def setup():
-    import numpy  # TEMP-DEV-SHIM
-    if not hasattr(numpy, 'bool'): numpy.bool = bool  # TEMP-DEV-SHIM
     import csm_engine
     from csm_engine import scene_builder
     csm_engine.register()

@@ -25,7 +25,6 @@ import pytest
 pytestmark = pytest.mark.hosts
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-BUILD_SCRIPT = os.path.join(REPO, "tools", "build.py")
 RENDER_SIZE = (160, 120)
 # A pixel counts as lit when the sun adds at least this much to its luminance (0..1 PNG).
 LIT_THRESHOLD = 0.05
