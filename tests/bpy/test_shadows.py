@@ -271,3 +271,43 @@ def test_spot_light_casts_a_shadow(empty_scene):
     assert len(dark) > 200 and len(lit) > 200
     assert dark.mean() < 0.15 * lit.mean(), (dark.mean(), lit.mean())
     assert np.mean(dark < 0.5 * np.median(lit)) > 0.9
+
+
+def test_an_impossible_shadow_resolution_falls_back_and_says_so(pillar_field):
+    scene, _ = pillar_field
+    from csm_engine import engine
+    scene.csm.cascade_count = 4
+    scene.csm.resolution = 8192
+    scene.csm.equal_resolution = True          # 4 x 8192^2: an atlas past GL's size limit
+    images = render_scene(scene, 160, 120)
+    assert any("halving" in w for w in engine.LAST_RENDER["warnings"]), engine.LAST_RENDER
+    assert (images["aux"][..., 0] < 0.5).mean() > 0.005, "shadows still render"
+
+
+def test_frozen_cascades_keep_their_boxes_and_draw_them(pillar_field):
+    scene, _ = pillar_field
+    from csm_engine import engine
+    scene.csm.freeze_cascades = True
+    render_scene(scene, 240, 160)
+    frozen = [t.clip_from_world.copy() for t in engine.LAST_RENDER["plan"].tiles]
+    scene.camera.location.x += 15.0
+    images = render_scene(scene, 240, 160)
+    moved = [t.clip_from_world for t in engine.LAST_RENDER["plan"].tiles]
+    assert all(np.array_equal(a, b) for a, b in zip(frozen, moved))
+    color = images["combined"][..., :3]
+    box_lines = (color[..., 0] > 0.9) & (color[..., 1] < 0.3) & (color[..., 2] < 0.3)
+    assert box_lines.sum() > 50, "the first cascade's box is drawn in red"
+    scene.csm.freeze_cascades = False
+    render_scene(scene, 240, 160)
+    assert not np.array_equal(engine.LAST_RENDER["plan"].tiles[0].clip_from_world, frozen[0])
+
+
+def test_front_face_culling_keeps_closed_casters_shadowing(pillar_field):
+    scene, _ = pillar_field
+    scene.csm.cull_front_faces = True
+    images = render_scene(scene, 480, 320)
+    to_light = -COURSE_SUN.normalized()
+    rows, cols, points, normals = sun_facing_points(images, to_light)
+    expected = ray_cast_shadowed(world_bvh(scene), points, normals, to_light)
+    mismatch = np.mean((images["aux"][rows, cols, 0] < 0.5) != expected)
+    assert mismatch < 0.02, f"{mismatch:.2%} disagree with back faces as casters"

@@ -6,7 +6,8 @@ looking through the scene camera, shows the default scene as CSM renders it with
 frame's rectangle in that screenshot and the F12 renders; this file starts the X server
 and Blender, then compares pixels.
 
-``CSM_UPDATE_DOCS=1`` also copies the screenshot to ``docs/images/viewport_blender34.png``.
+``CSM_UPDATE_DOCS=1`` also copies the screenshot, once it has matched the render, to
+``docs/images/viewport_blender34.png``.
 """
 
 import json
@@ -28,20 +29,21 @@ SCREEN_SIZE = (1600, 900)
 BLENDER_TIMEOUT_S = 120
 
 # How close the viewport's camera frame must be to the F12 render (RGB in 0..1).
-# Measured here (the same on every run): mean 0.0027, and 0.9% of pixels off by more than
-# 0.1. Both images come from the same pipeline through the same view transform; they differ
-# only where rasterization does: the frame sits at a fractional window position, so polygon
-# edges land on other pixels; the frame is resampled bilinearly; Blender draws the camera
-# frame's outline even with overlays off; and the viewport's cascades are fitted to the
-# whole region rather than the frame, which moves shadow edges by a texel. For scale: the
-# render shifted by 1 / 2 / 4 px gives 1.5% / 2.4% / 4.1% of pixels off, without shadows
-# 0.021 and 11%, flipped left-right 0.09 and 46%.
+# Measured here (the same on every run): mean 0.0022, and 0.5% of pixels off by more than
+# 0.1. Both images come from the same pipeline through the same view transform, with dither
+# off; they differ only where rasterization does: the frame sits at a fractional window
+# position, so polygon edges land on other pixels; the frame is resampled bilinearly;
+# Blender draws the camera frame's outline even with overlays off; and the viewport's
+# cascades are fitted to the whole region rather than the frame, which moves shadow edges
+# by a texel. For scale: the render shifted by 1 / 2 / 4 px gives 1.0% / 1.8% / 3.3% of
+# pixels off; without sun shadows, mean 0.014 and 8.8%; flipped left-right 0.08 and 43%.
 MAX_MEAN_DIFFERENCE = 0.01
 PIXEL_OFF = 0.1               # a pixel is "off" when a channel differs by more than this
 MAX_FRACTION_OFF = 0.02
 
-# What the default scene must look like for the match to mean something (luminance 0..1).
-DARK = 0.03                   # black sky and sun shadows (the scene has no world: no ambient)
+# What the frame must show for the match to mean something (luminance 0..1).
+SHADOW_STEP = 0.05            # darker than the shadowless render by this much: in shadow
+SUNLIT_TOLERANCE = 0.02       # as bright as the shadowless render: in sunlight
 LIT = 0.15
 
 
@@ -154,11 +156,7 @@ def viewport_run(x_display, hosts, tmp_path_factory):
     if report["error"] or process.returncode != 0:
         _fail(f"the driver failed (exit code {process.returncode}):\n"
               f"{report['error'] or output[-4000:]}")
-    run = ViewportRun(str(out_dir), report, output, seconds)
-    if os.environ.get("CSM_UPDATE_DOCS") == "1":
-        os.makedirs(os.path.dirname(DOCS_SCREENSHOT), exist_ok=True)
-        shutil.copyfile(run.path("viewport.png"), DOCS_SCREENSHOT)
-    return run
+    return ViewportRun(str(out_dir), report, output, seconds)
 
 
 # --- pixels -------------------------------------------------------------------------------
@@ -248,26 +246,30 @@ def test_viewport_shows_the_default_scene_as_csm_renders_it(viewport_run, images
               f"{report['camera_frame']}, render {report['render_size']}, images in "
               f"{viewport_run.out_dir}")
     assert mean <= MAX_MEAN_DIFFERENCE and fraction_off <= MAX_FRACTION_OFF, detail
+    if os.environ.get("CSM_UPDATE_DOCS") == "1":
+        # Only a screenshot that passed the comparison goes into the documentation.
+        os.makedirs(os.path.dirname(DOCS_SCREENSHOT), exist_ok=True)
+        shutil.copyfile(viewport_run.path("viewport.png"), DOCS_SCREENSHOT)
 
 
 def test_viewport_picture_has_lit_and_shadowed_content(images):
-    """A match between two black (or two flat) pictures would prove nothing: the camera
-    frame must show the landscape, lit by the sun, with shadows on the ground."""
+    """A match between two flat or empty pictures would prove nothing: the camera frame must
+    show the landscape with the sun's shadows on it. Shadowed and sunlit pixels are found
+    by comparing the viewport with the render whose sun casts no shadow, so the check does
+    not depend on the sky colour or the ambient level."""
     crop = images["crop"]
     light = luminance(crop)
-    dark, lit = float((light < DARK).mean()), float((light > LIT).mean())
-    assert light.std() > 0.08, f"the viewport picture is nearly uniform (std {light.std():.3f})"
-    assert 0.1 < dark < 0.8 and lit > 0.2, f"dark {dark:.2%}, lit {lit:.2%}"
-    # The lower half is ground, all of it in front of the sky: dark pixels there are shadow.
-    ground = light[light.shape[0] // 2:]
-    shadow, sunlit = float((ground < DARK).mean()), float((ground > LIT).mean())
-    assert shadow > 0.05 and sunlit > 0.3, f"ground: shadow {shadow:.2%}, sunlit {sunlit:.2%}"
-    # Not grey: the landscape is green grass and brown/red blocks.
-    green = crop[..., 1] > crop[..., 0] + 0.05
-    assert green.mean() > 0.2, f"only {green.mean():.2%} of the frame is green"
-    # The shadows are the sun's: the render without them is brighter on the ground.
-    no_shadows = luminance(images["render_no_shadows"])[light.shape[0] // 2:]
-    assert no_shadows.mean() > ground.mean() + 0.02, (no_shadows.mean(), ground.mean())
+    shadowless = luminance(images["render_no_shadows"])
+    in_shadow = float((shadowless - light > SHADOW_STEP).mean())
+    sunlit = float(((np.abs(shadowless - light) < SUNLIT_TOLERANCE) & (light > LIT)).mean())
+    green = float((crop[..., 1] > crop[..., 0] + 0.05).mean())
+    summary = (f"luminance std {light.std():.3f}, in shadow {in_shadow:.1%}, sunlit "
+               f"{sunlit:.1%}, green {green:.1%}")
+    # Measured: std 0.10, in shadow 11%, sunlit 83%, green 91% (grass and tree tops).
+    assert light.std() > 0.05, "the viewport picture is nearly uniform: " + summary
+    assert in_shadow > 0.03, "the viewport shows (almost) no sun shadows: " + summary
+    assert sunlit > 0.3, "the viewport shows (almost) no sunlit surfaces: " + summary
+    assert green > 0.3, "the viewport does not show the green landscape: " + summary
 
 
 def test_comparison_rejects_pictures_that_are_not_the_render(images):
