@@ -48,6 +48,7 @@ class ShadowTile:
     is_perspective: bool
     origin: tuple = (0, 0)     # atlas texels
     cascade: object = None     # cascades.CascadeFit for sun tiles
+    display_near: float = 0.0  # where the scene starts in this light's depth (debug view)
 
 
 @dataclass
@@ -139,6 +140,20 @@ def plan_shadows(snap, bounds):
         spot_tiles[index] = len(tiles)
         tiles.append(ShadowTile(clip_from_light @ light_from_world, resolution,
                                 2.0 * np.tan(half) / resolution, near, far, True))
+    if bounds is not None:
+        # The shadow-map view stretches depth over the part the scene occupies; the occluder
+        # margin alone would squeeze all content into the last few percent of grey.
+        corners = np.array([[bounds[i & 1][0], bounds[(i >> 1) & 1][1], bounds[(i >> 2) & 1][2],
+                             1.0] for i in range(8)])
+        for tile in tiles:
+            clip = corners @ tile.clip_from_world.T
+            window = np.clip(clip[:, 2] / clip[:, 3] * 0.5 + 0.5, 0.0, 1.0).min()
+            if tile.is_perspective:
+                ndc = window * 2.0 - 1.0
+                tile.display_near = 2.0 * tile.near * tile.far / (
+                    tile.far + tile.near - ndc * (tile.far - tile.near))
+            else:
+                tile.display_near = tile.near + window * (tile.far - tile.near)
     return ShadowPlan(tiles, count, np.asarray(splits, dtype=np.float64),
                       np.asarray(bands, dtype=np.float64), distance, spot_tiles, frozen_camera)
 
@@ -195,7 +210,7 @@ def pack_frame(snap, plan):
         put(data, "shadow_tiles", [tile.origin[0], tile.origin[1], tile.resolution,
                                    tile.texel_world], t)
         put(data, "shadow_depth", [tile.near, tile.far, 1.0 if tile.is_perspective else 0.0,
-                                   0.0], t)
+                                   tile.display_near], t)
     for i, light in enumerate(points):
         put(data, "point_lights", [*light.position, light.radius], 2 * i)
         put(data, "point_lights", [*light.color, 0.0], 2 * i + 1)

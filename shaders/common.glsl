@@ -6,7 +6,8 @@
  *   frame.shadow_tiles[t]      : atlas origin x, y (texels), resolution (texels),
  *                                world size of one texel (orthographic) or, for perspective
  *                                tiles, texel size per unit of distance from the light
- *   frame.shadow_depth[t]      : light near, light far, 1 if perspective, 0
+ *   frame.shadow_depth[t]      : light near, light far, 1 if perspective, scene's nearest
+ *                                depth in this light (for the shadow-map debug view)
  */
 
 #define DEBUG_NONE 0

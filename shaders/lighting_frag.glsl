@@ -9,7 +9,9 @@ vec3 show_shadow_map(int t, vec2 uv)
   vec4 depth_info = frame.shadow_depth[t];
   ivec2 p = ivec2(clamp(uv, 0.0, 1.0) * (tile.z - 1.0)) + ivec2(tile.xy);
   float linear = shadow_linear_depth(texelFetch(shadow_atlas, p, 0).r, depth_info);
-  return vec3((linear - depth_info.x) / max(depth_info.y - depth_info.x, 1e-6));
+  /* depth_info.w: where the scene's bounds begin in this light's depth, so the grey ramp
+   * spans the content rather than the (mostly empty) occluder margin. */
+  return vec3((linear - depth_info.w) / max(depth_info.y - depth_info.w, 1e-6));
 }
 
 /* Where a square shadow-map view sits on screen: full screen (centred square) or inset. */
