@@ -73,7 +73,16 @@ void main()
     vec3 l = normalize(frame.sun_direction.xyz);
     float n_dot_l = dot(n, l);
     if (frame.sun_color.w > 0.5) {
-      sun_vis = sun_visibility(p, n, n_dot_l, view_depth, cascade);
+      if (n_dot_l > 0.0) {
+        sun_vis = sun_visibility(p, n, n_dot_l, view_depth, cascade);
+      }
+      else {
+        /* Facing away from the sun: in its own shadow, whatever the map says (and no taps
+         * to pay for). The cascade index is still reported for the debug views. */
+        sun_vis = 0.0;
+        int c = cascade_index(view_depth);
+        cascade = float(c);
+      }
     }
     color += frame.sun_color.rgb * blinn_phong(albedo, specular, shininess, n, l, to_camera) *
              sun_vis;
