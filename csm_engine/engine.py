@@ -35,6 +35,8 @@ class CSMRenderEngine(bpy.types.RenderEngine):
     bl_use_preview = False
     bl_use_gpu_context = True
     bl_use_shading_nodes_custom = False
+    # Material Preview stays EEVEE's; only Rendered shading runs CSM.
+    bl_use_eevee_viewport = True
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)

@@ -46,7 +46,7 @@ if REPO not in sys.path:
     sys.path.insert(0, REPO)
 
 STATE = {"started": time.monotonic(), "step": "setup", "draws": 0, "draws_at_mark": 0,
-         "window": None, "area": None, "region": None}
+         "draw_error": None, "window": None, "area": None, "region": None}
 REPORT = {"error": None, "blender": bpy.app.version_string, "timings_s": {}}
 
 
@@ -73,7 +73,12 @@ def count_view_draws():
     original = engine.CSMRenderEngine.view_draw
 
     def view_draw(self, context, depsgraph):
-        original(self, context, depsgraph)
+        try:
+            original(self, context, depsgraph)
+        except Exception:
+            # Blender would only print it; the driver stops at its next tick and reports it.
+            STATE["draw_error"] = traceback.format_exc()
+            raise
         STATE["draws"] += 1
 
     engine.CSMRenderEngine.view_draw = view_draw
@@ -109,6 +114,8 @@ def setup():
     scene_builder.import_scene_file(SCENE_FILE, scene)
     render = scene.render
     render.engine = 'CSM'
+    # Only the aspect matters while the viewport is captured; F12 later renders at the size
+    # the camera frame has on screen.
     render.resolution_x, render.resolution_y = 1600, 1600 * VIEWPORT_ASPECT[1] // VIEWPORT_ASPECT[0]
     render.resolution_percentage = 100
     render.image_settings.file_format = 'PNG'
@@ -213,6 +220,8 @@ def tick():
     try:
         step = STATE["step"]
         elapsed = time.monotonic() - STATE["started"]
+        if STATE["draw_error"]:
+            raise RuntimeError("the CSM viewport draw failed:\n" + STATE["draw_error"])
         if elapsed > WAIT_LIMIT_S:
             raise RuntimeError(f"gave up in step '{step}' after {elapsed:.0f} s: "
                                f"{STATE['draws']} viewport draws seen")
