@@ -15,7 +15,8 @@ far they differ, which proves the ratio method measures what the shader computes
 A pixel is compared when both engines light it with shadows off (``off`` above a small
 fraction of the image's typical brightness): background, surfaces facing away from the sun
 and grazing surfaces are excluded. It counts as shadowed when visibility < 0.5.
-Point, spot and area lights are hidden and the world is black for both engines; the
+Every light but the sun CSM shades with (the first sun; point, spot, area lights and
+further suns) is hidden, the sun's angle is 0 and the world is black for both engines; the
 scene's camera and CSM settings are kept (debug views are switched off for the
 measurement). Everything the tool changes on the scene is restored afterwards.
 
@@ -424,5 +425,18 @@ def main(argv=None, prog="python -m csm_engine.ground_truth"):
         return error.code
 
 
+def _exit(code):
+    """Exit with ``code``. NOTE: pip bpy 4.2 segfaults while Python shuts down after any
+    render by an engine with ``bl_use_gpu_context`` (a six-line engine does it too), which
+    would turn every exit code into 139; skipping the shutdown keeps the code. 5.0 exits
+    cleanly, so it gets the normal path."""
+    import bpy
+    if bpy.app.version < (5, 0, 0):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    _exit(main())

@@ -4,6 +4,9 @@ Owns the ``CSMSettings`` PropertyGroup: every user-facing knob of the engine, sa
 .blend file and animatable like any Blender property. Defaults are chosen against peers
 (see ``docs/architecture.md``, ``../shared/docs/peers.md``) and the course's assignment:
 3 cascades of 2048/1024/512, hybrid splits, 3x3 PCF, a blend band between cascades.
+Lambda and the biases were chosen with the ground-truth tool (docs/ground-truth.md): with
+lambda 0.75 the 2048 map covered only empty foreground in the course's camera, and a slope
+bias of 1 texel became several scene units in the 512 cascade (missed contact shadows).
 
 Nothing here touches the GPU. ``snapshot.py`` copies these values into plain data once per
 frame, so the pipeline never reads ``bpy`` properties while drawing.
@@ -67,7 +70,7 @@ class CSMSettings(bpy.types.PropertyGroup):
         name="Split Scheme", items=SPLIT_SCHEMES, default='HYBRID', update=_redraw,
         description="How the shadow distance is divided between cascades")
     split_lambda: FloatProperty(
-        name="Lambda", default=0.75, min=0.0, max=1.0, update=_redraw,
+        name="Lambda", default=0.5, min=0.0, max=1.0, update=_redraw,
         description="Hybrid split weight: 0 = uniform, 1 = logarithmic")
     manual_splits: FloatVectorProperty(
         name="Manual Splits", size=3, default=(0.1, 0.3, 0.6), min=0.0, max=1.0,
@@ -119,10 +122,10 @@ class CSMSettings(bpy.types.PropertyGroup):
         description="Depth offset in shadow texels, the same for all cascades (scaled to each "
                     "cascade's texel size). Too low: acne. Too high: peter-panning")
     slope_bias: FloatProperty(
-        name="Slope Bias", default=1.0, min=0.0, soft_max=10.0, update=_redraw,
+        name="Slope Bias", default=0.25, min=0.0, soft_max=10.0, update=_redraw,
         description="Extra depth offset in texels that grows with the surface slope to the sun")
     normal_offset: FloatProperty(
-        name="Normal Offset", default=1.0, min=0.0, soft_max=10.0, update=_redraw,
+        name="Normal Offset", default=0.5, min=0.0, soft_max=10.0, update=_redraw,
         description="Moves the lookup point along the surface normal by this many texels")
     cull_front_faces: BoolProperty(
         name="Cull Front Faces", default=False, update=_redraw,

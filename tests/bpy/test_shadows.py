@@ -119,6 +119,7 @@ def long_ground(empty_scene):
     add_sun((0.2, 0.4, -1.0))
     add_camera(scene, (0, -5, 4), (0, 60, 0), lens=30, clip_end=300)
     scene.csm.debug_view = 'CASCADES'
+    scene.csm.split_lambda = 0.75      # splits at ~43 and ~150 m: both well on screen
     return scene
 
 
@@ -189,6 +190,7 @@ def test_stabilized_shadows_hold_still_while_the_camera_moves_less_than_a_texel(
     camera.data.clip_end = 100.0
     width, height = 400, 400
     pixel = camera.data.ortho_scale / width        # 0.1 scene units
+    scene.csm.resolution = 1024                    # texels of at least 0.12 units
 
     def shadow_mask(x):
         camera.location.x = x
