@@ -1,15 +1,26 @@
-"""Operators: import and reload CSM scene files, and the File > Import menu entry.
+"""Operators: import/reload scene files, reload shaders, reset the sun, screenshot, and the
+first-person camera; plus the File > Import menu entry.
 
-Owns the user-facing commands around ``scene_builder``. Errors are shown as one-line
-operator reports and the operator returns ``{'CANCELLED'}``; a traceback never reaches
-the user, and a failed import leaves the scene untouched (the builder guarantees it).
+Owns the user-facing commands. Errors are shown as one-line operator reports and the
+operator returns ``{'CANCELLED'}``; a traceback never reaches the user, and a failed
+import or reload leaves the scene untouched (the builder guarantees it).
+
+The first-person movement is plain numpy math (``step``, ``turn``) on a world_from_camera
+4x4 matrix (camera looks down its local -Z, local +Y is up), so it is testable without a
+window; the modal operator only feeds it key states and mouse motion.
 """
 
-import bpy
-from bpy.props import StringProperty
-from bpy_extras.io_utils import ImportHelper
+import math
+import os
+import time
 
-from . import scene_builder
+import bpy
+import numpy as np
+from bpy.props import FloatProperty, StringProperty
+from bpy_extras.io_utils import ExportHelper, ImportHelper
+from mathutils import Matrix
+
+from . import light_controls, scene_builder
 
 
 class CSM_OT_import_scene(bpy.types.Operator, ImportHelper):
@@ -63,6 +74,323 @@ object (or the most recent import)"""
         return {'FINISHED'}
 
 
+def tag_3d_views_for_redraw(context):
+    window_manager = context.window_manager
+    for window in (window_manager.windows if window_manager is not None else ()):
+        for area in window.screen.areas:
+            if area.type == 'VIEW_3D':
+                area.tag_redraw()
+
+
+class CSM_OT_reload_shaders(bpy.types.Operator):
+    """Recompile all CSM shaders from the shaders/ folder. On a GLSL error the last good \
+shaders keep running and the error (file:line) is shown"""
+    bl_idname = "csm.reload_shaders"
+    bl_label = "Reload CSM Shaders"
+    bl_options = {'REGISTER'}
+
+    def execute(self, context):
+        from . import shaders   # imports the gpu module: only when the user asks
+        error = shaders.LIBRARY.reload()
+        tag_3d_views_for_redraw(context)   # also redraws the panel that shows the error
+        if error is not None:
+            # ShaderLibrary.reload already printed it to the console.
+            self.report({'ERROR'}, f"{error} (keeping the previous shaders)")
+            return {'CANCELLED'}
+        self.report({'INFO'}, "CSM shaders reloaded")
+        return {'FINISHED'}
+
+
+class CSM_OT_reset_sun_direction(bpy.types.Operator):
+    """Turn the scene's Sun back to the direction given in its scene file"""
+    bl_idname = "csm.reset_sun_direction"
+    bl_label = "Reset to Scene File"
+    bl_options = {'REGISTER', 'UNDO'}
+
+    @classmethod
+    def poll(cls, context):
+        return context.scene is not None and light_controls.sun_object(context.scene) is not None
+
+    def execute(self, context):
+        sun = light_controls.sun_object(context.scene)
+        direction = light_controls.file_sun_direction(sun)
+        if direction is None:
+            self.report({'ERROR'}, f"Sun '{sun.name}' was not imported from a CSM scene file")
+            return {'CANCELLED'}
+        light_controls.set_sun_travel(sun, direction)
+        self.report({'INFO'}, f"Sun '{sun.name}' reset to the scene file's direction")
+        return {'FINISHED'}
+
+
+class CSM_OT_screenshot(bpy.types.Operator, ExportHelper):
+    """Render the scene camera with CSM and save the picture as a PNG \
+(size: Render > Format resolution)"""
+    bl_idname = "csm.screenshot"
+    bl_label = "CSM Screenshot"
+    bl_options = {'REGISTER'}
+
+    filename_ext = ".png"
+    filter_glob: StringProperty(default="*.png", options={'HIDDEN'})
+    filepath: StringProperty(
+        name="File Path",
+        description="PNG file to write; // means next to the .blend file (or the current "
+                    "folder when the .blend is not saved)",
+        default="//csm_screenshot.png", subtype='FILE_PATH')
+
+    def invoke(self, context, event):
+        if not self.filepath:
+            self.filepath = "//csm_screenshot.png"
+        self.filepath = bpy.path.abspath(self.filepath)
+        context.window_manager.fileselect_add(self)
+        return {'RUNNING_MODAL'}
+
+    def execute(self, context):
+        scene = context.scene
+        if scene.camera is None:
+            self.report({'ERROR'}, "The scene has no camera to take a screenshot from")
+            return {'CANCELLED'}
+        path = os.path.abspath(bpy.path.abspath(self.filepath))
+        if not path.lower().endswith(".png"):
+            path += ".png"
+        render, image_settings = scene.render, scene.render.image_settings
+        saved = (render.engine, image_settings.file_format)
+        try:
+            render.engine = "CSM"
+            image_settings.file_format = 'PNG'
+            bpy.ops.render.render()
+            from . import engine
+            if engine.LAST_RENDER.get("error"):
+                self.report({'ERROR'}, f"CSM render failed: {engine.LAST_RENDER['error']}")
+                return {'CANCELLED'}
+            result = bpy.data.images.get("Render Result")
+            if result is None:
+                self.report({'ERROR'}, "CSM render produced no image")
+                return {'CANCELLED'}
+            os.makedirs(os.path.dirname(path) or ".", exist_ok=True)
+            result.save_render(path, scene=scene)
+        except (OSError, RuntimeError) as err:
+            self.report({'ERROR'}, f"{path}: cannot save screenshot ({err})")
+            return {'CANCELLED'}
+        finally:
+            render.engine, image_settings.file_format = saved
+        self.report({'INFO'}, f"Saved CSM screenshot to {path}")
+        return {'FINISHED'}
+
+
+# ------------------------------------------------------------------ first-person camera
+# Pitch stops this far from straight up/down, so the view never flips over.
+PITCH_LIMIT_DEGREES = 89.0
+MOUSE_DEGREES_PER_PIXEL = 0.2
+WORLD_UP = np.array([0.0, 0.0, 1.0])
+
+
+def step(matrix, keys_down, dt, speed):
+    """world_from_camera after moving for ``dt`` seconds at ``speed`` (scene units/s).
+
+    ``keys_down`` holds letters: W/S forward/back along the view direction, A/D left/right
+    along the camera's X axis, Q/E down/up along world Z. Opposite keys cancel; several
+    directions at once move at ``speed`` along their normalized sum.
+    """
+    matrix = np.array(matrix, dtype=np.float64)
+    right = matrix[:3, 0] / np.linalg.norm(matrix[:3, 0])
+    forward = -matrix[:3, 2] / np.linalg.norm(matrix[:3, 2])
+    held = {key.upper() for key in keys_down}
+    move = ((("W" in held) - ("S" in held)) * forward +
+            (("D" in held) - ("A" in held)) * right +
+            (("E" in held) - ("Q" in held)) * WORLD_UP)
+    length = float(np.linalg.norm(move))
+    if length > 1e-12:
+        matrix[:3, 3] += move / length * speed * dt
+    return matrix
+
+
+def yaw_pitch(matrix):
+    """Heading (degrees from +X toward +Y) and pitch (degrees above horizontal) of a view."""
+    matrix = np.asarray(matrix, dtype=np.float64)
+    forward = -matrix[:3, 2] / np.linalg.norm(matrix[:3, 2])
+    up = matrix[:3, 1] / np.linalg.norm(matrix[:3, 1])
+    # Looking straight down (a top view) the heading is where the view's up points.
+    heading = forward[:2] - forward[2] * up[:2]
+    yaw = math.degrees(math.atan2(heading[1], heading[0]))
+    pitch = math.degrees(math.asin(max(-1.0, min(1.0, forward[2]))))
+    return yaw, pitch
+
+
+def view_rotation(yaw_degrees, pitch_degrees):
+    """3x3 world_from_camera rotation for a heading and pitch, with no roll."""
+    yaw, pitch = math.radians(yaw_degrees), math.radians(pitch_degrees)
+    forward = np.array([math.cos(pitch) * math.cos(yaw), math.cos(pitch) * math.sin(yaw),
+                        math.sin(pitch)])
+    right = np.array([math.sin(yaw), -math.cos(yaw), 0.0])
+    up = np.cross(right, forward)
+    return np.column_stack((right, up, -forward))
+
+
+def turn(matrix, yaw_degrees, pitch_degrees):
+    """world_from_camera turned about the camera position: yaw about world Z (positive =
+    to the left, seen from above), then pitch about the camera's X (positive = look up),
+    clamped to +-PITCH_LIMIT_DEGREES. Roll is removed, as in a first-person game."""
+    matrix = np.array(matrix, dtype=np.float64)
+    yaw, pitch = yaw_pitch(matrix)
+    pitch = max(-PITCH_LIMIT_DEGREES, min(PITCH_LIMIT_DEGREES, pitch + pitch_degrees))
+    scale = np.linalg.norm(matrix[:3, :3], axis=0)
+    matrix[:3, :3] = view_rotation(yaw + yaw_degrees, pitch) * scale
+    return matrix
+
+
+def mouse_turn(dx_pixels, dy_pixels, degrees_per_pixel=MOUSE_DEGREES_PER_PIXEL):
+    """(yaw, pitch) degrees for a mouse drag: right turns right, up looks up."""
+    return -dx_pixels * degrees_per_pixel, dy_pixels * degrees_per_pixel
+
+
+def scene_speed(scene):
+    """Automatic first-person speed, scene units per second: bounds diagonal / 10."""
+    corners = []
+    for obj in scene.objects:
+        if obj.type == 'MESH' and obj.visible_get():
+            local = np.array([tuple(c) for c in obj.bound_box], dtype=np.float64)
+            world = np.array(obj.matrix_world, dtype=np.float64)
+            corners.append(local @ world[:3, :3].T + world[:3, 3])
+    if not corners:
+        return 1.0
+    corners = np.concatenate(corners)
+    diagonal = float(np.linalg.norm(corners.max(axis=0) - corners.min(axis=0)))
+    return max(diagonal / 10.0, 1e-3)
+
+
+_MOVE_KEYS = {'W': "W", 'A': "A", 'S': "S", 'D': "D", 'Q': "Q", 'E': "E"}
+_ARROWS = {'LEFT_ARROW': (1.0, 0.0), 'RIGHT_ARROW': (-1.0, 0.0),
+           'UP_ARROW': (0.0, 1.0), 'DOWN_ARROW': (0.0, -1.0)}
+
+
+class CSM_OT_first_person(bpy.types.Operator):
+    """First-person camera: W/S forward/back, A/D left/right, Q/E down/up, drag or arrow \
+keys to look, mouse wheel for speed, Esc or right-click to leave. Moves the scene camera \
+when looking through it, else the viewport"""
+    bl_idname = "csm.first_person"
+    bl_label = "CSM First-Person Camera"
+    bl_options = {'REGISTER', 'UNDO', 'BLOCKING'}
+
+    speed: FloatProperty(
+        name="Speed",
+        description="Movement speed in scene units (metres) per second; 0 = automatic "
+                    "(scene size / 10 per second times the Fly Speed setting)",
+        default=0.0, min=0.0, soft_max=1000.0, unit='VELOCITY')
+
+    @classmethod
+    def poll(cls, context):
+        area = getattr(context, "area", None)
+        return (area is not None and area.type == 'VIEW_3D'
+                and getattr(context, "region_data", None) is not None)
+
+    # -- where the view lives ---------------------------------------------------------
+    def _through_camera(self, context):
+        return self._rv3d.view_perspective == 'CAMERA' and context.scene.camera is not None
+
+    def _get_matrix(self, context):
+        if self._through_camera(context):
+            return np.array(context.scene.camera.matrix_world, dtype=np.float64)
+        return np.linalg.inv(np.array(self._rv3d.view_matrix, dtype=np.float64))
+
+    def _set_matrix(self, context, matrix):
+        if self._through_camera(context):
+            context.scene.camera.matrix_world = Matrix(matrix.tolist())
+            return
+        rv3d = self._rv3d
+        rotation = Matrix(matrix[:3, :3].tolist()).normalized().to_quaternion()
+        # The viewport orbits view_location at view_distance; the eye sits behind it.
+        eye = matrix[:3, 3]
+        back = matrix[:3, 2] / np.linalg.norm(matrix[:3, 2])
+        rv3d.view_rotation = rotation
+        rv3d.view_location = tuple(eye - back * rv3d.view_distance)
+
+    def _header(self, context):
+        speed = self._speed(context)
+        context.area.header_text_set(
+            f"CSM first person: W/S A/D Q/E move, drag/arrows look, wheel speed "
+            f"({speed:.3g} m/s), Esc/right-click exit")
+
+    def _speed(self, context):
+        if self.speed > 0.0:
+            return self.speed
+        return self._auto_speed * context.scene.csm_light.fly_speed_factor
+
+    # -- modal ------------------------------------------------------------------------
+    def invoke(self, context, event):
+        self._rv3d = context.region_data
+        if self._rv3d.view_perspective == 'ORTHO':
+            self._rv3d.view_perspective = 'PERSP'   # first person needs a perspective eye
+        self._auto_speed = scene_speed(context.scene)
+        self._held = set()
+        self._arrows = set()
+        self._drag_from = None
+        self._last_time = time.perf_counter()
+        self._timer = context.window_manager.event_timer_add(1.0 / 60.0, window=context.window)
+        context.window_manager.modal_handler_add(self)
+        self._header(context)
+        return {'RUNNING_MODAL'}
+
+    def _finish(self, context):
+        context.window_manager.event_timer_remove(self._timer)
+        context.area.header_text_set(None)
+        context.area.tag_redraw()
+
+    def modal(self, context, event):
+        if event.type == 'ESC' or (event.type == 'RIGHTMOUSE' and event.value == 'PRESS'):
+            self._finish(context)
+            return {'FINISHED'}
+        if event.type in _MOVE_KEYS:
+            if event.value == 'PRESS':
+                self._held.add(_MOVE_KEYS[event.type])
+            elif event.value == 'RELEASE':
+                self._held.discard(_MOVE_KEYS[event.type])
+            return {'RUNNING_MODAL'}
+        if event.type in _ARROWS:
+            if event.value == 'PRESS':
+                self._arrows.add(event.type)
+            elif event.value == 'RELEASE':
+                self._arrows.discard(event.type)
+            return {'RUNNING_MODAL'}
+        if event.type in {'WHEELUPMOUSE', 'WHEELDOWNMOUSE'}:
+            light = context.scene.csm_light
+            factor = 1.25 if event.type == 'WHEELUPMOUSE' else 0.8
+            if self.speed > 0.0:
+                self.speed *= factor
+            else:
+                light.fly_speed_factor = min(max(light.fly_speed_factor * factor, 0.01), 100.0)
+            self._header(context)
+            return {'RUNNING_MODAL'}
+        if event.type == 'LEFTMOUSE':
+            self._drag_from = ((event.mouse_x, event.mouse_y)
+                               if event.value == 'PRESS' else None)
+            return {'RUNNING_MODAL'}
+        if event.type == 'MOUSEMOVE' and self._drag_from is not None:
+            dx = event.mouse_x - self._drag_from[0]
+            dy = event.mouse_y - self._drag_from[1]
+            self._drag_from = (event.mouse_x, event.mouse_y)
+            matrix = turn(self._get_matrix(context), *mouse_turn(dx, dy))
+            self._set_matrix(context, matrix)
+            context.area.tag_redraw()
+            return {'RUNNING_MODAL'}
+        if event.type == 'TIMER' and event.timer == self._timer:
+            now = time.perf_counter()
+            # A stalled frame (a slow render) must not throw the camera across the scene.
+            dt = min(now - self._last_time, 0.1)
+            self._last_time = now
+            if self._held or self._arrows:
+                matrix = self._get_matrix(context)
+                rate = context.scene.csm_light.fly_turn_speed * dt
+                yaw = sum(_ARROWS[key][0] for key in self._arrows) * rate
+                pitch = sum(_ARROWS[key][1] for key in self._arrows) * rate
+                if yaw or pitch:
+                    matrix = turn(matrix, yaw, pitch)
+                matrix = step(matrix, self._held, dt, self._speed(context))
+                self._set_matrix(context, matrix)
+                context.area.tag_redraw()
+            return {'RUNNING_MODAL'}
+        return {'PASS_THROUGH'}
+
+
 def menu_import(self, context):
     self.layout.operator(CSM_OT_import_scene.bl_idname, text="CSM Scene (.json)")
 
@@ -70,6 +398,10 @@ def menu_import(self, context):
 classes = (
     CSM_OT_import_scene,
     CSM_OT_reload_scene,
+    CSM_OT_reload_shaders,
+    CSM_OT_reset_sun_direction,
+    CSM_OT_screenshot,
+    CSM_OT_first_person,
 )
 
 
