@@ -15,7 +15,7 @@ OUT = os.path.join(REPO, "docs", "images")
 
 DEBUG_VIEWS = ("CASCADES", "SHADOW_FACTOR", "SHADOW_MAP", "TEXEL_DENSITY", "ALBEDO", "NORMAL",
                "POSITION", "DEPTH", "SPECULAR")
-SCHEMES = (("UNIFORM", {}), ("LOG", {}), ("HYBRID", {"split_lambda": 0.75}),
+SCHEMES = (("UNIFORM", {}), ("LOG", {}), ("HYBRID", {}),
            ("MANUAL", {"manual_splits": (0.05, 0.2, 0.6)}))
 
 
