@@ -40,7 +40,7 @@ DEBUG_VIEWS = (
                                        "blue = wasted resolution, red = too few texels"),
     ('ALBEDO', "G-buffer: albedo", "Base colour channel of the G-buffer"),
     ('NORMAL', "G-buffer: normal", "World-space normals mapped to 0..1"),
-    ('POSITION', "G-buffer: position", "World position, fractional part per scene unit"),
+    ('POSITION', "G-buffer: position", "World position in repeating bands 1/20 of the shadow distance wide"),
     ('DEPTH', "G-buffer: depth", "View depth, normalised to the shadow distance"),
     ('SPECULAR', "G-buffer: specular", "Specular strength (red) and shininess / 256 (green)"),
 )

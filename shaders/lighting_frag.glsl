@@ -158,7 +158,8 @@ void main()
     color = n * 0.5 + 0.5;
   }
   else if (debug_view == DEBUG_POSITION) {
-    color = fract(p);
+    /* Bands 1/20 of the shadow distance wide: readable whatever the scene's scale. */
+    color = fract(p * 20.0 / max(frame.shadow_params.y, 1e-6));
   }
   else if (debug_view == DEBUG_DEPTH) {
     color = vec3(clamp(view_depth / max(frame.shadow_params.y, 1e-6), 0.0, 1.0));
