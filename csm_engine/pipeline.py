@@ -62,14 +62,6 @@ class ShadowPlan:
     frozen_camera: object = None
 
 
-def scene_bounds(instances, meshes):
-    """World AABB of every drawable instance (None when the scene is empty)."""
-    boxes = instance_bounds(instances, meshes)
-    if boxes is None:
-        return None
-    return boxes[0].min(axis=0), boxes[1].max(axis=0)
-
-
 def instance_bounds(instances, meshes):
     """(N,3) world-space min and max of each instance's mesh bounds."""
     rows = [(i.world_from_object, meshes[i.key]) for i in instances if i.key in meshes]
@@ -323,6 +315,8 @@ class Pipeline:
         start = time.perf_counter()
         self.timings = {}
 
+        # World AABB per instance: caster culling per cascade, and the scene's bounds for the
+        # automatic occluder margin.
         bounds_lo_hi = instance_bounds(snap.instances, cache.meshes)
         bounds = None if bounds_lo_hi is None else \
             (bounds_lo_hi[0].min(axis=0), bounds_lo_hi[1].max(axis=0))

@@ -3,7 +3,6 @@
 Runs ``python -m csm_engine`` in a subprocess of this interpreter (pip bpy 5.0), and the
 ``blender -b -P csm_engine/blender_cli.py`` bridge on Debian's Blender 3.4.
 """
-import json
 import os
 import shutil
 import subprocess

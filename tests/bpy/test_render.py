@@ -1,10 +1,8 @@
 """The deferred renderer as a user sees it: materials, lights, camera and output options."""
-import os
 import resource
 
 import bpy
 import numpy as np
-from mathutils import Vector
 
 from conftest import render_scene
 from test_shadows import add_box, add_camera, add_ground, add_sun
