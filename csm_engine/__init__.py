@@ -16,7 +16,7 @@ bl_info = {
     "category": "Render",
 }
 
-_MODULES = ("settings", "engine", "operators", "ui")
+_MODULES = ("settings", "light_controls", "engine", "operators", "keymap", "ui")
 
 
 def _modules():

@@ -56,7 +56,9 @@ def sun_object(scene):
 
 def sun_travel(obj):
     """Unit direction the sun's light travels (its world -Z axis)."""
-    axis = -np.array(obj.matrix_world, dtype=np.float64)[:3, 2]
+    # matrix_basis follows edits at once; matrix_world only after a depsgraph update.
+    matrix = obj.matrix_basis if obj.parent is None else obj.matrix_world
+    axis = -np.array(matrix, dtype=np.float64)[:3, 2]
     length = float(np.linalg.norm(axis))
     return tuple(axis / length) if length > 0.0 else _NO_SUN_TRAVEL
 
@@ -74,8 +76,19 @@ def set_sun_travel(obj, travel):
     x_axis = up.cross(z_axis).normalized()
     y_axis = z_axis.cross(x_axis)
     rotation = Matrix((x_axis, y_axis, z_axis)).transposed()
-    location, _rotation, scale = obj.matrix_world.decompose()
-    obj.matrix_world = Matrix.LocRotScale(location, rotation.to_quaternion(), scale)
+    rotation = rotation.to_quaternion()
+    if obj.parent is not None:
+        location, _rotation, scale = obj.matrix_world.decompose()
+        obj.matrix_world = Matrix.LocRotScale(location, rotation, scale)
+        return
+    # Only the rotation channel the user animates changes; location and scale stay exact.
+    if obj.rotation_mode == 'QUATERNION':
+        obj.rotation_quaternion = rotation
+    elif obj.rotation_mode == 'AXIS_ANGLE':
+        axis, angle = rotation.to_axis_angle()
+        obj.rotation_axis_angle = (angle, *axis)
+    else:
+        obj.rotation_euler = rotation.to_euler(obj.rotation_mode, obj.rotation_euler)
 
 
 def file_sun_direction(obj):

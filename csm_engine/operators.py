@@ -91,7 +91,8 @@ shaders keep running and the error (file:line) is shown"""
 
     def execute(self, context):
         from . import shaders   # imports the gpu module: only when the user asks
-        error = shaders.LIBRARY.reload()
+        library = shaders.LIBRARY
+        error = library.reload()
         tag_3d_views_for_redraw(context)   # also redraws the panel that shows the error
         if error is not None:
             # ShaderLibrary.reload already printed it to the console.
@@ -361,8 +362,11 @@ when looking through it, else the viewport"""
             self._header(context)
             return {'RUNNING_MODAL'}
         if event.type == 'LEFTMOUSE':
-            self._drag_from = ((event.mouse_x, event.mouse_y)
-                               if event.value == 'PRESS' else None)
+            # Blender also sends CLICK_DRAG once the mouse moves; only PRESS/RELEASE count.
+            if event.value == 'PRESS':
+                self._drag_from = (event.mouse_x, event.mouse_y)
+            elif event.value == 'RELEASE':
+                self._drag_from = None
             return {'RUNNING_MODAL'}
         if event.type == 'MOUSEMOVE' and self._drag_from is not None:
             dx = event.mouse_x - self._drag_from[0]
@@ -372,10 +376,11 @@ when looking through it, else the viewport"""
             self._set_matrix(context, matrix)
             context.area.tag_redraw()
             return {'RUNNING_MODAL'}
-        if event.type == 'TIMER' and event.timer == self._timer:
+        if event.type == 'TIMER':
             now = time.perf_counter()
-            # A stalled frame (a slow render) must not throw the camera across the scene.
-            dt = min(now - self._last_time, 0.1)
+            # A long stall (a slow render) must not throw the camera across the scene, but a
+            # slow software-GL viewport (several frames per second) still moves in real time.
+            dt = min(now - self._last_time, 0.5)
             self._last_time = now
             if self._held or self._arrows:
                 matrix = self._get_matrix(context)

@@ -155,6 +155,12 @@ class ShaderCompileError(Exception):
     """A GLSL program failed to compile; the message names file and line where known."""
 
 
+# NOTE: Blender 4.2+ rewrites the program text and drops the file number of ``#line N id``
+# from compiler messages, so each file instead gets its own block of line numbers: line n of
+# file k is reported as k * LINES_PER_FILE + n, whatever the driver or Blender prints.
+LINES_PER_FILE = 10000
+
+
 def _expand_includes(name, directory, file_ids, depth=0):
     """Return ``name``'s source with includes inlined and ``#line`` markers for mapping."""
     if depth > 8:
@@ -166,27 +172,50 @@ def _expand_includes(name, directory, file_ids, depth=0):
     except OSError as error:
         raise ShaderCompileError(f"{path}: cannot read shader ({error.strerror})") from None
     file_id = file_ids.setdefault(name, len(file_ids) + 1)
-    out = [f"#line 1 {file_id}"]
+    base = file_id * LINES_PER_FILE
+    out = [f"#line {base + 1}"]
     for number, line in enumerate(text.splitlines(), start=1):
         match = _INCLUDE.match(line)
         if match:
             out.append(_expand_includes(match.group(1), directory, file_ids, depth + 1))
-            out.append(f"#line {number + 1} {file_id}")
+            out.append(f"#line {base + number + 1}")
         else:
             out.append(line)
     return "\n".join(out) + "\n"
 
 
 def _map_log(log, file_ids):
-    """Rewrite Mesa/NVIDIA style ``ID:LINE(COL)`` or ``ID(LINE)`` locations to file names."""
-    names = {str(i): n for n, i in file_ids.items()}
+    """Rewrite line numbers in a compiler log to ``file.glsl:line`` (see LINES_PER_FILE)."""
+    names = {i: n for n, i in file_ids.items()}
 
     def replace(match):
-        name = names.get(match.group(1))
-        return f"{name}:{match.group(2)}" if name else match.group(0)
+        number = int(match.group(0))
+        name = names.get(number // LINES_PER_FILE)
+        return f"{name}:{number % LINES_PER_FILE}" if name else match.group(0)
 
-    log = re.sub(r"\b(\d+):(\d+)\(\d+\)", replace, log)
-    return re.sub(r"\b(\d+)\((\d+)\)", replace, log)
+    return re.sub(r"(?<![\d.])\d{5,6}(?![\d.])", replace, log)
+
+
+_LOCATION = re.compile(r"[\w.-]+\.glsl:\d+")
+
+
+def _error_lines(log):
+    """The compiler's error lines, each with a file:line. Blender 4.2 prints the location on
+    the line above the message (``10171 | <source>`` then ``| Error: ...``)."""
+    lines = log.splitlines()
+    errors = []
+    for index, line in enumerate(lines):
+        if "error" not in line.lower() or "EGL" in line or "pyGPU_Shader" in line:
+            continue
+        text = line.strip(" |")
+        if not _LOCATION.search(text):
+            for previous in reversed(lines[max(index - 3, 0):index]):
+                found = _LOCATION.search(previous)
+                if found:
+                    text = f"{found.group(0)}: {text}"
+                    break
+        errors.append(text)
+    return errors
 
 
 class _CapturedOutput:
@@ -251,9 +280,11 @@ def _build(program_name, spec, directory):
             shader, failed = None, error
     if failed is not None:
         log = _map_log(captured.text, file_ids)
-        errors = [line.strip() for line in log.splitlines()
-                  if "error" in line.lower() and "EGL" not in line]
+        errors = _error_lines(log)
         detail = "; ".join(errors[:5]) or str(failed)
+        if not _LOCATION.search(detail):
+            # Some Blender versions (4.2) print no line at all: name the files at least.
+            detail = f"in {', '.join(file_ids)}: {detail}"
         raise ShaderCompileError(f"shader '{program_name}' failed to compile: {detail}")
     # Pass through anything else the driver said (warnings), as Blender would have.
     noise = [line for line in captured.text.splitlines() if line and "EGL" not in line]

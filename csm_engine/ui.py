@@ -1,7 +1,9 @@
 """Panels: the CSM settings in Properties > Render and in the 3D View sidebar ("CSM" tab).
 
 Owns layout only. Both places draw the same groups through ``draw_*`` functions, so a
-setting appears identically wherever the user looks for it.
+setting appears identically wherever the user looks for it. "Light" edits the sun
+(``Scene.csm_light``, see light_controls.py) and the ambient term; "Scene" holds the
+import/reload/shader-reload/screenshot/first-person commands and the last shader error.
 """
 
 import bpy
@@ -59,10 +61,57 @@ def draw_debug(layout, csm):
     col.prop(csm, "freeze_cascades")
 
 
-def draw_lighting(layout, context):
+def draw_light(layout, context):
+    from . import light_controls
     col = layout.column()
+    sun = light_controls.sun_object(context.scene)
+    if sun is None:
+        col.label(text="No Sun light in this scene", icon='INFO')
+    else:
+        light = context.scene.csm_light
+        col.label(text=f"Sun: {sun.name}", icon='LIGHT_SUN')
+        col.prop(light, "sun_azimuth")
+        col.prop(light, "sun_elevation")
+        col.prop(light, "sun_direction", text="Direction")
+        col.operator("csm.reset_sun_direction", icon='FILE_REFRESH')
+    col.separator()
     col.prop(context.scene.csm, "ambient_strength")
     col.prop(context.scene.render, "film_transparent")
+
+
+def _wrapped(text, width=48):
+    lines, line = [], ""
+    for word in text.split():
+        if line and len(line) + 1 + len(word) > width:
+            lines.append(line)
+            line = word
+        else:
+            line = f"{line} {word}" if line else word
+    return lines + ([line] if line else [])
+
+
+def draw_scene(layout, context):
+    col = layout.column(align=True)
+    col.operator("csm.import_scene", text="Import Scene...", icon='IMPORT')
+    col.operator("csm.reload_scene", text="Reload Scene (Ctrl R)", icon='FILE_REFRESH')
+    col.operator("csm.reload_shaders", text="Reload Shaders (F5)", icon='SHADERFX')
+    col.operator("csm.screenshot", text="Screenshot...", icon='RENDER_STILL')
+    col.operator("csm.first_person", text="First Person (Shift F)", icon='VIEW_CAMERA')
+    layout.prop(context.scene.csm_light, "fly_speed_factor")
+    layout.prop(context.scene.csm_light, "fly_turn_speed")
+    error = shader_error()
+    if error:
+        box = layout.box()
+        box.label(text="Shader error (previous shaders in use):", icon='ERROR')
+        for line in _wrapped(error):
+            box.label(text=line)
+
+
+def shader_error():
+    """The last shader reload error, without importing gpu when shaders never loaded."""
+    import sys
+    shaders = sys.modules.get(__package__ + ".shaders")
+    return getattr(getattr(shaders, "LIBRARY", None), "last_error", None)
 
 
 GROUPS = (
@@ -70,8 +119,9 @@ GROUPS = (
     ("filtering", "Filtering", lambda layout, context: draw_filtering(layout, context.scene.csm)),
     ("bias", "Bias", lambda layout, context: draw_bias(layout, context.scene.csm)),
     ("occluders", "Occluders", lambda layout, context: draw_occluders(layout, context.scene.csm)),
-    ("lighting", "Lighting", draw_lighting),
+    ("light", "Light", draw_light),
     ("debug", "Debug", lambda layout, context: draw_debug(layout, context.scene.csm)),
+    ("scene", "Scene", draw_scene),
 )
 
 
