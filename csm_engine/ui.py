@@ -126,6 +126,11 @@ GROUPS = (
 
 
 def _make_panel(space, region, context_name, key, label, draw_fn, category=None):
+    def draw(self, context):
+        # Must return None: Blender 3.4 reports any other return value on every redraw.
+        self.layout.use_property_split = True
+        draw_fn(self.layout, context)
+
     attrs = {
         "bl_idname": f"CSM_PT_{space.lower()}_{key}",
         "bl_label": label,
@@ -133,8 +138,7 @@ def _make_panel(space, region, context_name, key, label, draw_fn, category=None)
         "bl_region_type": region,
         "COMPAT_ENGINES": {"CSM"},
         "poll": classmethod(lambda cls, context: context.engine == "CSM"),
-        "draw": lambda self, context: (setattr(self.layout, "use_property_split", True),
-                                       draw_fn(self.layout, context)),
+        "draw": draw,
     }
     if context_name:
         attrs["bl_context"] = context_name
