@@ -34,18 +34,3 @@ def empty_scene():
     scene.view_settings.view_transform = "Standard"
     scene.render.resolution_percentage = 100
     return scene
-
-
-def render_scene(scene, width=320, height=240):
-    """Render with CSM; returns the passes as (H, W, C) float arrays, top row first (as the
-    PNG shows it): "combined" RGBA, "aux" (sun visibility, cascade, view depth, coverage),
-    "normal". ``LAST_RENDER["plan"]`` holds the cascades used."""
-    from csm_engine import engine
-    scene.render.resolution_x, scene.render.resolution_y = width, height
-    engine.LAST_RENDER["keep_images"] = True
-    try:
-        bpy.ops.render.render()
-    finally:
-        engine.LAST_RENDER["keep_images"] = False
-    assert engine.LAST_RENDER["error"] is None, engine.LAST_RENDER["error"]
-    return {name: image[::-1] for name, image in engine.LAST_RENDER["images"].items()}

@@ -12,7 +12,7 @@ import bpy
 import numpy as np
 import pytest
 
-from conftest import REPO
+from bpy_helpers import REPO
 
 DEFAULT_SCENE = os.path.join(REPO, "data", "scenes", "default.json")
 

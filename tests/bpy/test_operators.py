@@ -17,7 +17,7 @@ import bpy
 import numpy as np
 import pytest
 
-from conftest import REPO, render_scene
+from bpy_helpers import REPO, render_scene
 from csm_engine import keymap, light_controls, operators, paths, shaders, ui
 
 DEFAULT_SCENE = os.path.join(REPO, "data", "scenes", "default.json")

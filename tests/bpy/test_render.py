@@ -4,7 +4,7 @@ import resource
 import bpy
 import numpy as np
 
-from conftest import render_scene
+from bpy_helpers import render_scene
 from test_shadows import add_box, add_camera, add_ground, add_sun
 
 

@@ -10,7 +10,7 @@ import pytest
 from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 
-from conftest import render_scene
+from bpy_helpers import render_scene
 
 COURSE_SUN = Vector((0.3, 0.7, -0.6))   # the course's (0.3, -0.6, -0.7), Y-up -> Z-up
 

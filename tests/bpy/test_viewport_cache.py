@@ -8,7 +8,7 @@ import bpy
 import numpy as np
 
 from csm_engine import engine, mesh_cache, snapshot
-from conftest import render_scene
+from bpy_helpers import render_scene
 
 
 def _make_scene(empty_scene):

@@ -186,4 +186,8 @@ def host_dir(tmp_path):
 def hosts():
     """These helpers as one object, so tests never `import conftest` (several test folders
     have a conftest.py, and that import would pick whichever was loaded last)."""
-    return sys.modules[__name__]
+    return _THIS_MODULE
+
+
+# Captured at import: sys.modules["conftest"] is rebound when another folder's conftest loads.
+_THIS_MODULE = sys.modules[__name__]
