@@ -60,6 +60,7 @@ class ShadowPlan:
     shadow_distance: float
     spot_tiles: dict           # spot index -> tile index
     frozen_camera: object = None
+    warnings: list = None      # settings that could not be honoured, in the user's words
 
 
 def instance_bounds(instances, meshes):
@@ -89,6 +90,7 @@ def plan_shadows(snap, bounds):
     splits = np.array([camera.clip_start, distance])
     bands = np.zeros(MAX_CASCADES)
     frozen_camera = None
+    warnings = []
     if snap.sun is not None and snap.sun.casts_shadow:
         margin = None if s.occluder_margin_auto else float(s.occluder_margin)
         manual = cascades.manual_splits_from_fractions(distance, s.manual_splits, count)
@@ -96,8 +98,7 @@ def plan_shadows(snap, bounds):
         if s.freeze_cascades and key in _FROZEN:
             result, frozen_camera = _FROZEN[key]
         else:
-            result = cascades.compute_cascades(
-                camera.world_from_view, camera.clip_from_view, -snap.sun.to_light,
+            arguments = dict(
                 count=count, scheme=s.split_scheme, lam=float(s.split_lambda),
                 manual=manual if s.split_scheme == 'MANUAL' else None,
                 shadow_distance=distance, base_resolution=int(s.resolution),
@@ -106,6 +107,19 @@ def plan_shadows(snap, bounds):
                 # Auto: the near plane reaches the scene's bounds, so no caster is clipped.
                 # Manual: exactly the margin the user typed, nothing added.
                 scene_bounds=bounds if s.occluder_margin_auto else None)
+            try:
+                result = cascades.compute_cascades(
+                    camera.world_from_view, camera.clip_from_view, -snap.sun.to_light,
+                    **arguments)
+            except ValueError as error:
+                # An impossible setting (e.g. manual splits that do not increase): say which
+                # and draw with hybrid splits rather than fail the frame.
+                warnings.append(f"{error}; using hybrid splits instead")
+                arguments.update(scheme="HYBRID", manual=None)
+                result = cascades.compute_cascades(
+                    camera.world_from_view, camera.clip_from_view, -snap.sun.to_light,
+                    **arguments)
+            warnings.extend(result.notes)
             if s.freeze_cascades:
                 _FROZEN[key] = (result, camera)
                 frozen_camera = camera
@@ -147,7 +161,8 @@ def plan_shadows(snap, bounds):
             else:
                 tile.display_near = tile.near + window * (tile.far - tile.near)
     return ShadowPlan(tiles, count, np.asarray(splits, dtype=np.float64),
-                      np.asarray(bands, dtype=np.float64), distance, spot_tiles, frozen_camera)
+                      np.asarray(bands, dtype=np.float64), distance, spot_tiles, frozen_camera,
+                      warnings)
 
 
 def layout_atlas(tiles):
@@ -322,6 +337,7 @@ class Pipeline:
             (bounds_lo_hi[0].min(axis=0), bounds_lo_hi[1].max(axis=0))
         plan = plan_shadows(snap, bounds)
         self.last_plan = plan
+        self.warnings.extend(w for w in plan.warnings if w not in self.warnings)
         atlas = self._atlas(plan)
         frame_data = pack_frame(snap, plan)
         frame_ubo = self._frame_ubo(frame_data)

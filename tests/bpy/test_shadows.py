@@ -313,3 +313,14 @@ def test_front_face_culling_keeps_closed_casters_shadowing(pillar_field):
     expected = ray_cast_shadowed(world_bvh(scene), points, normals, to_light)
     mismatch = np.mean((images["aux"][rows, cols, 0] < 0.5) != expected)
     assert mismatch < 0.02, f"{mismatch:.2%} disagree with back faces as casters"
+
+
+def test_impossible_manual_splits_warn_and_fall_back(pillar_field):
+    scene, _ = pillar_field
+    from csm_engine import engine
+    scene.csm.split_scheme = 'MANUAL'
+    scene.csm.manual_splits = (0.5, 0.2, 0.6)      # the second split lies before the first
+    images = render_scene(scene, 160, 120)
+    warnings = " ".join(engine.LAST_RENDER["warnings"])
+    assert "manual split" in warnings and "hybrid" in warnings, warnings
+    assert (images["aux"][..., 0] < 0.5).mean() > 0.005, "shadows still render"
