@@ -152,10 +152,16 @@ def run(argv, prog="python -m csm_engine"):
     return 0
 
 
-def main(argv=None, prog="python -m csm_engine"):
+def run_reporting_errors(run_command, argv, prog, label):
+    """Run a command-line tool; a user's mistake becomes one line on stderr and its exit
+    code. Shared by this CLI and the ground-truth tool."""
     argv = sys.argv[1:] if argv is None else argv
     try:
-        return run(argv, prog)
+        return run_command(argv, prog)
     except CLIError as error:
-        print(f"csm: error: {error}", file=sys.stderr)
+        print(f"{label}: error: {error}", file=sys.stderr)
         return error.code
+
+
+def main(argv=None, prog="python -m csm_engine"):
+    return run_reporting_errors(run, argv, prog, "csm")

@@ -416,13 +416,8 @@ def run(argv, prog="python -m csm_engine.ground_truth"):
 
 
 def main(argv=None, prog="python -m csm_engine.ground_truth"):
-    from .cli import CLIError
-    argv = sys.argv[1:] if argv is None else argv
-    try:
-        return run(argv, prog)
-    except CLIError as error:
-        print(f"ground truth: error: {error}", file=sys.stderr)
-        return error.code
+    from .cli import run_reporting_errors
+    return run_reporting_errors(run, argv, prog, "ground truth")
 
 
 def _exit(code):

@@ -13,7 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-# Total mesh uploads in this process, per cache key; read by tests and the benchmark.
+# Total mesh uploads in this process; read by tests and the benchmark.
 UPLOADS = {"count": 0}
 
 
@@ -207,7 +207,6 @@ class MeshCache:
         self.textures = {}
         self._dirty = set()
         self._materials_dirty = False
-        self.uploads = 0
 
     def invalidate(self, keys=None, materials=False):
         """Mark meshes for re-upload (None = all); ``materials`` re-reads material nodes."""
@@ -234,7 +233,6 @@ class MeshCache:
                 arrays = extract_arrays(mesh)
                 materials = [material_info(slot.material) for slot in obj.material_slots]
                 self.meshes[key] = upload(*arrays, materials)
-                self.uploads += 1
             finally:
                 obj.to_mesh_clear()
         self._dirty.clear()

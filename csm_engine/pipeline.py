@@ -246,7 +246,7 @@ class Pipeline:
         self.warnings = []
         self.timings = {}
         self.profile = False
-        self.last_plan = None
+        self.gbuffer_fb = None      # kept after draw() for the final render's read-back
 
     # -- resources ---------------------------------------------------------------------
     def _texture(self, name, size, fmt):
@@ -336,7 +336,6 @@ class Pipeline:
         bounds = None if bounds_lo_hi is None else \
             (bounds_lo_hi[0].min(axis=0), bounds_lo_hi[1].max(axis=0))
         plan = plan_shadows(snap, bounds)
-        self.last_plan = plan
         self.warnings.extend(w for w in plan.warnings if w not in self.warnings)
         atlas = self._atlas(plan)
         frame_data = pack_frame(snap, plan)
@@ -366,11 +365,11 @@ class Pipeline:
                     clip_from_object = _column_major(
                         tile.clip_from_world @ instance.world_from_object)
                     for batch, slot in mesh.batches:
-                        material = mesh.materials[slot] if slot < len(mesh.materials) \
-                            else None
-                        texture, params = self._material_shadow(cache, material, white)
+                        texture, color, params = self._material(cache, mesh, slot, white)
                         shadow.uniform_float("clip_from_object", clip_from_object)
-                        shadow.uniform_float("material_params", params)
+                        # Only alpha-masked materials need their alpha in the shadow pass.
+                        shadow.uniform_float("material_params",
+                                             (0.0, color[3], params[2], params[3]))
                         shadow.uniform_sampler("base_color_texture", texture)
                         batch.draw(shadow)
             gpu.state.face_culling_set('NONE')
@@ -397,8 +396,7 @@ class Pipeline:
                     continue
                 world_from_object = _column_major(instance.world_from_object)
                 for batch, slot in mesh.batches:
-                    material = mesh.materials[slot] if slot < len(mesh.materials) else None
-                    texture, color, params = self._material_gbuffer(cache, material, white)
+                    texture, color, params = self._material(cache, mesh, slot, white)
                     gbuffer.uniform_float("world_from_object", world_from_object)
                     gbuffer.uniform_float("base_color", color)
                     gbuffer.uniform_float("material_params", params)
@@ -442,14 +440,10 @@ class Pipeline:
         mask = cascades.aabbs_in_cascade(bounds_lo_hi[0], bounds_lo_hi[1], tile.cascade)
         return np.nonzero(mask)[0]
 
-    def _material_shadow(self, cache, material, white):
-        if material is None or material.alpha_cutoff <= 0.0:
-            return white, (0.0, 1.0, 0.0, 0.0)
-        texture = cache.texture(material.image) if material.image is not None else None
-        return (texture or white,
-                (0.0, material.base_color[3], material.alpha_cutoff, 1.0 if texture else 0.0))
-
-    def _material_gbuffer(self, cache, material, white):
+    def _material(self, cache, mesh, slot, white):
+        """Texture, base colour and packed parameters (shininess, specular, alpha cutoff,
+        has texture) of one material slot; both the shadow and G-buffer passes use them."""
+        material = mesh.materials[slot] if slot < len(mesh.materials) else None
         if material is None:
             return white, (0.8, 0.8, 0.8, 1.0), (32.0, 0.5, 0.0, 0.0)
         texture = cache.texture(material.image) if material.image is not None else None
