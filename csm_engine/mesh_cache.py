@@ -126,36 +126,83 @@ def _shininess(roughness):
     return float(min(max(2.0 / (r ** 4) - 2.0, 1.0), 4096.0))
 
 
+def _read(collection, prop, count, dtype):
+    out = np.empty(count, dtype=dtype)
+    if count:
+        collection.foreach_get(prop, out)
+    return out
+
+
+def _attribute(mesh, name, domain, prop, count, dtype):
+    """A generic attribute's values, or None when the mesh has no such attribute.
+
+    NOTE: generic attributes (3.5+) are read by ``foreach_get`` as one memory copy; the
+    older per-element RNA paths (``loops["vertex_index"]``, ``uv_layers[..].data["uv"]``)
+    copy element by element and cost ~100x more in 4.x/5.x (docs/benchmarks.md)."""
+    attributes = getattr(mesh, "attributes", None)
+    attribute = attributes.get(name) if attributes is not None else None
+    if attribute is None or attribute.domain != domain:
+        return None
+    return _read(attribute.data, prop, count, dtype)
+
+
 def extract_arrays(mesh):
     """Numpy arrays of one evaluated mesh: per-corner position, normal, UV; triangles."""
     mesh.calc_loop_triangles()
     loop_count = len(mesh.loops)
     tri_count = len(mesh.loop_triangles)
+    vertex_count = len(mesh.vertices)
 
-    coords = np.empty(len(mesh.vertices) * 3, dtype=np.float32)
-    mesh.vertices.foreach_get("co", coords)
-    vertex_index = np.empty(loop_count, dtype=np.int32)
-    mesh.loops.foreach_get("vertex_index", vertex_index)
-    positions = coords.reshape(-1, 3)[vertex_index]
+    coords = _attribute(mesh, "position", 'POINT', "vector", vertex_count * 3, np.float32)
+    if coords is None:                           # 3.4
+        coords = _read(mesh.vertices, "co", vertex_count * 3, np.float32)
+    coords = coords.reshape(-1, 3)
+    vertex_index = _attribute(mesh, ".corner_vert", 'CORNER', "value", loop_count, np.int32)
+    if vertex_index is None:                     # 3.4 .. 3.5
+        vertex_index = _read(mesh.loops, "vertex_index", loop_count, np.int32)
+    positions = coords[vertex_index]
 
-    normals = np.empty(loop_count * 3, dtype=np.float32)
     if hasattr(mesh, "corner_normals"):          # 4.1+
-        mesh.corner_normals.foreach_get("vector", normals)
+        normals = _read(mesh.corner_normals, "vector", loop_count * 3, np.float32)
     else:                                        # 3.4 .. 4.0
         mesh.calc_normals_split()
-        mesh.loops.foreach_get("normal", normals)
+        normals = _read(mesh.loops, "normal", loop_count * 3, np.float32)
 
-    uvs = np.zeros(loop_count * 2, dtype=np.float32)
+    uvs = None
     uv_layer = mesh.uv_layers.active
     if uv_layer is not None and loop_count:
-        uv_layer.data.foreach_get("uv", uvs)
+        uvs = _attribute(mesh, uv_layer.name, 'CORNER', "vector", loop_count * 2, np.float32)
+        if uvs is None:                          # 3.4: UV maps are not attributes yet
+            uvs = _read(uv_layer.data, "uv", loop_count * 2, np.float32)
+    if uvs is None:
+        uvs = np.zeros(loop_count * 2, dtype=np.float32)
 
-    triangles = np.empty(tri_count * 3, dtype=np.int32)
-    mesh.loop_triangles.foreach_get("loops", triangles)
-    material_index = np.empty(tri_count, dtype=np.int32)
-    mesh.loop_triangles.foreach_get("material_index", material_index)
+    # No fast path exists for the triangulation itself (~90 ns a triangle in 5.0).
+    triangles = _read(mesh.loop_triangles, "loops", tri_count * 3, np.int32)
+    material_index = _triangle_material_index(mesh, tri_count)
+    if vertex_count:
+        bounds = (coords.min(axis=0), coords.max(axis=0))
+    else:
+        bounds = (np.zeros(3, np.float32), np.zeros(3, np.float32))
     return (np.ascontiguousarray(positions), normals.reshape(-1, 3), uvs.reshape(-1, 2),
-            triangles.reshape(-1, 3), material_index)
+            triangles.reshape(-1, 3), material_index, bounds)
+
+
+def _triangle_material_index(mesh, tri_count):
+    """Material slot of each triangle. Meshes with one material have no ``material_index``
+    attribute in 3.5+, which makes the common case free."""
+    face_count = len(mesh.polygons)
+    per_face = _attribute(mesh, "material_index", 'FACE', "value", face_count, np.int32)
+    if per_face is not None:
+        if hasattr(mesh, "loop_triangle_polygons"):      # 3.6+: fast per-triangle face
+            face = _read(mesh.loop_triangle_polygons, "value", tri_count, np.int32)
+        else:
+            face = _read(mesh.loop_triangles, "polygon_index", tri_count, np.int32)
+        return per_face[face]
+    if getattr(mesh, "attributes", None) is not None and \
+            hasattr(mesh, "loop_triangle_polygons"):
+        return np.zeros(tri_count, dtype=np.int32)
+    return _read(mesh.loop_triangles, "material_index", tri_count, np.int32)
 
 
 def _vertex_format():
@@ -167,7 +214,7 @@ def _vertex_format():
     return fmt
 
 
-def upload(positions, normals, uvs, triangles, material_index, materials):
+def upload(positions, normals, uvs, triangles, material_index, object_bounds, materials):
     """Numpy arrays -> one vertex buffer and an index buffer per used material slot."""
     import gpu
     vbo = gpu.types.GPUVertBuf(_vertex_format(), len(positions))
@@ -189,10 +236,7 @@ def upload(positions, normals, uvs, triangles, material_index, materials):
             ibo = gpu.types.GPUIndexBuf(type='TRIS', seq=indices)
             ibos.append(ibo)
             batches.append((gpu.types.GPUBatch(type='TRIS', buf=vbo, elem=ibo), slot))
-    if len(positions):
-        aabb_min, aabb_max = positions.min(axis=0), positions.max(axis=0)
-    else:
-        aabb_min = aabb_max = np.zeros(3, dtype=np.float32)
+    aabb_min, aabb_max = object_bounds
     UPLOADS["count"] += 1
     return GPUMesh(batches=batches, materials=list(materials),
                    aabb_min=aabb_min.astype(np.float64), aabb_max=aabb_max.astype(np.float64),

@@ -7,7 +7,8 @@ own (``view_draw``) or an offscreen one that ``render()`` reads back. Both go th
 
 Passes per frame:
 1. shadow: one depth-only tile per cascade (and per shadowed spot light) in one atlas;
-2. G-buffer: albedo+specular, normal+shininess, world position+coverage, depth;
+2. G-buffer: albedo+specular, normal+shininess, view depth (0 = background), depth; world
+   positions are rebuilt from view depth in the lighting pass (``world_positions`` here);
 3. lighting: a full-screen pass reading the G-buffer and the atlas (``lighting_frag.glsl``);
 4. overlays: frozen cascade boxes.
 
@@ -187,6 +188,7 @@ def pack_frame(snap, plan):
     put = FRAME_LAYOUT.set
     put(data, "clip_from_world", camera.clip_from_world)
     put(data, "view_from_world", np.linalg.inv(camera.world_from_view))
+    put(data, "world_from_clip", np.linalg.inv(camera.clip_from_world))
     put(data, "camera_position", [*camera.position, 1.0 if camera.is_perspective else 0.0])
     put(data, "camera_forward", [*camera.forward, 0.0])
     put(data, "viewport", [camera.width, camera.height, 1.0 / camera.width, 1.0 / camera.height])
@@ -229,6 +231,36 @@ def pack_frame(snap, plan):
         put(data, "spot_lights", [*spot.direction, cos_outer], 4 * i + 2)
         put(data, "spot_lights", [cos_inner, 0.0, 0.0, 0.0], 4 * i + 3)
     return data
+
+
+def _front_to_back(snap, bounds_lo_hi):
+    """Instance indices sorted by the view depth of their bounds' centres."""
+    if bounds_lo_hi is None:
+        return range(len(snap.instances))
+    centres = 0.5 * (bounds_lo_hi[0] + bounds_lo_hi[1])
+    return np.argsort(centres @ np.asarray(snap.camera.forward, dtype=np.float64))
+
+
+def world_positions(camera, view_depth):
+    """(H, W, 3) world positions of pixel centres at the given view depths: the same
+    reconstruction as ``world_position_at`` in lighting_frag.glsl, in float64."""
+    height, width = view_depth.shape
+    x = (np.arange(width) + 0.5) / width * 2.0 - 1.0
+    y = (np.arange(height) + 0.5) / height * 2.0 - 1.0
+    ndc = np.stack(np.broadcast_arrays(x[None, :], y[:, None]), axis=-1)     # (H, W, 2)
+    world_from_clip = np.linalg.inv(camera.clip_from_world)
+    points = []
+    for z in (-1.0, 1.0):
+        clip = np.concatenate([ndc, np.full(ndc.shape[:2] + (1,), z),
+                               np.ones(ndc.shape[:2] + (1,))], axis=-1)
+        world = clip @ world_from_clip.T
+        points.append(world[..., :3] / world[..., 3:])
+    position = np.asarray(camera.position, dtype=np.float64)
+    forward = np.asarray(camera.forward, dtype=np.float64)
+    near_depth = (points[0] - position) @ forward
+    far_depth = (points[1] - position) @ forward
+    t = (view_depth - near_depth) / (far_depth - near_depth)
+    return points[0] + (points[1] - points[0]) * t[..., None]
 
 
 def _column_major(matrix):
@@ -345,63 +377,76 @@ class Pipeline:
         # 1. Shadow atlas
         t = time.perf_counter()
         atlas_fb = self._framebuffer("atlas", depth=atlas)
-        shadow = library.get("shadow")
         white = self._white_texture()
         with atlas_fb.bind():
             atlas_fb.clear(depth=1.0)
             gpu.state.depth_test_set('LESS_EQUAL')
             gpu.state.depth_mask_set(True)
             gpu.state.face_culling_set('FRONT' if snap.settings.cull_front_faces else 'NONE')
-            shadow.bind()
             for tile in plan.tiles:
                 gpu.state.viewport_set(tile.origin[0], tile.origin[1],
                                        tile.resolution, tile.resolution)
                 visible = self._cull(snap.instances, bounds_lo_hi, tile)
-                for index in visible:
-                    instance = snap.instances[index]
-                    mesh = cache.meshes.get(instance.key)
-                    if mesh is None:
-                        continue
-                    clip_from_object = _column_major(
-                        tile.clip_from_world @ instance.world_from_object)
-                    for batch, slot in mesh.batches:
-                        texture, color, params = self._material(cache, mesh, slot, white)
-                        shadow.uniform_float("clip_from_object", clip_from_object)
-                        # Only alpha-masked materials need their alpha in the shadow pass.
-                        shadow.uniform_float("material_params",
-                                             (0.0, color[3], params[2], params[3]))
-                        shadow.uniform_sampler("base_color_texture", texture)
-                        batch.draw(shadow)
+                for masked in (False, True):
+                    shadow = library.get("shadow_masked" if masked else "shadow")
+                    shadow.bind()
+                    for index in visible:
+                        instance = snap.instances[index]
+                        mesh = cache.meshes.get(instance.key)
+                        if mesh is None:
+                            continue
+                        clip_from_object = None
+                        for batch, slot in mesh.batches:
+                            texture, color, params = self._material(cache, mesh, slot, white)
+                            if (params[2] > 0.0) != masked:
+                                continue
+                            if clip_from_object is None:
+                                clip_from_object = _column_major(
+                                    tile.clip_from_world @ instance.world_from_object)
+                            shadow.uniform_float("clip_from_object", clip_from_object)
+                            if masked:   # the opaque program has no material inputs
+                                shadow.uniform_float("material_params",
+                                                     (0.0, color[3], params[2], params[3]))
+                                shadow.uniform_sampler("base_color_texture", texture)
+                            batch.draw(shadow)
             gpu.state.face_culling_set('NONE')
         t = self._sync(atlas_fb, "shadow", t)
 
         # 2. G-buffer
         albedo = self._texture("albedo", (width, height), 'RGBA16F')
         normal = self._texture("normal", (width, height), 'RGBA16F')
-        position = self._texture("position", (width, height), 'RGBA32F')
+        view_depth = self._texture("view_depth", (width, height), 'R32F')
         depth = self._texture("depth", (width, height), 'DEPTH_COMPONENT32F')
         gbuffer_fb = self._framebuffer("gbuffer", depth=depth,
-                                       colors=(albedo, normal, position))
-        gbuffer = library.get("gbuffer")
+                                       colors=(albedo, normal, view_depth))
+        # Near to far, so the early depth test skips the shading of hidden fragments.
+        order = _front_to_back(snap, bounds_lo_hi)
         with gbuffer_fb.bind():
             gpu.state.viewport_set(0, 0, width, height)
             gbuffer_fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
             gpu.state.depth_test_set('LESS_EQUAL')
             gpu.state.depth_mask_set(True)
-            gbuffer.bind()
-            gbuffer.uniform_block("frame", frame_ubo)
-            for instance in snap.instances:
-                mesh = cache.meshes.get(instance.key)
-                if mesh is None:
-                    continue
-                world_from_object = _column_major(instance.world_from_object)
-                for batch, slot in mesh.batches:
-                    texture, color, params = self._material(cache, mesh, slot, white)
-                    gbuffer.uniform_float("world_from_object", world_from_object)
-                    gbuffer.uniform_float("base_color", color)
-                    gbuffer.uniform_float("material_params", params)
-                    gbuffer.uniform_sampler("base_color_texture", texture)
-                    batch.draw(gbuffer)
+            for masked in (False, True):
+                gbuffer = library.get("gbuffer_masked" if masked else "gbuffer")
+                gbuffer.bind()
+                gbuffer.uniform_block("frame", frame_ubo)
+                for index in order:
+                    instance = snap.instances[index]
+                    mesh = cache.meshes.get(instance.key)
+                    if mesh is None:
+                        continue
+                    world_from_object = None
+                    for batch, slot in mesh.batches:
+                        texture, color, params = self._material(cache, mesh, slot, white)
+                        if (params[2] > 0.0) != masked:
+                            continue
+                        if world_from_object is None:
+                            world_from_object = _column_major(instance.world_from_object)
+                        gbuffer.uniform_float("world_from_object", world_from_object)
+                        gbuffer.uniform_float("base_color", color)
+                        gbuffer.uniform_float("material_params", params)
+                        gbuffer.uniform_sampler("base_color_texture", texture)
+                        batch.draw(gbuffer)
             gpu.state.depth_test_set('NONE')
         t = self._sync(gbuffer_fb, "gbuffer", t)
 
@@ -416,7 +461,7 @@ class Pipeline:
             lighting.uniform_block("frame", frame_ubo)
             lighting.uniform_sampler("gbuffer_albedo", albedo)
             lighting.uniform_sampler("gbuffer_normal", normal)
-            lighting.uniform_sampler("gbuffer_position", position)
+            lighting.uniform_sampler("gbuffer_depth", view_depth)
             lighting.uniform_sampler("shadow_atlas", atlas)
             self._fullscreen_batch().draw(lighting)
             if plan.frozen_camera is not None:
@@ -494,12 +539,20 @@ class Pipeline:
         out = {}
         count = width * height * 4
         reads = [("combined", target, 0), ("aux", target, 1), ("normal", self.gbuffer_fb, 1)]
-        if with_positions:
-            reads.append(("position", self.gbuffer_fb, 2))
         for name, fb, slot in reads:
             buffer = gpu.types.Buffer('FLOAT', count)
             with fb.bind():
                 fb.read_color(0, 0, width, height, 4, slot, 'FLOAT', data=buffer)
             out[name] = np.frombuffer(buffer, dtype=np.float32).reshape(height, width, 4).copy()
+        if with_positions:
+            # xyz = world position, w = coverage (1 on geometry), as tests ray-cast from it.
+            aux = out["aux"]
+            covered = aux[..., 3] > 0.5
+            position = np.zeros_like(aux)
+            position[..., :3] = world_positions(
+                snap.camera, np.where(covered, aux[..., 2], 1.0).astype(np.float64))
+            position[..., :3] *= covered[..., None]
+            position[..., 3] = covered
+            out["position"] = position
         self.timings["readback"] = time.perf_counter() - t
         return out, plan

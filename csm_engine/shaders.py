@@ -78,6 +78,7 @@ MAX_SHADOW_TILES = MAX_CASCADES + MAX_SPOT_LIGHTS
 FRAME_LAYOUT = UniformLayout("FrameData", (
     ("clip_from_world", "mat4", 1),
     ("view_from_world", "mat4", 1),
+    ("world_from_clip", "mat4", 1),    # rebuilds world positions from G-buffer view depth
     ("camera_position", "vec4", 1),    # xyz, w = 1 perspective / 0 orthographic
     ("camera_forward", "vec4", 1),     # xyz world view direction
     ("viewport", "vec4", 1),           # width, height, 1/width, 1/height (pixels)
@@ -110,13 +111,13 @@ PROGRAMS = {
     "gbuffer": dict(
         vertex="gbuffer_vert.glsl", fragment="gbuffer_frag.glsl",
         inputs=(("pos", "VEC3"), ("nor", "VEC3"), ("uv", "VEC2")),
-        interface=(("world_position", "VEC3", "smooth"), ("world_normal", "VEC3", "smooth"),
-                   ("tex_coord", "VEC2", "smooth")),
+        interface=(("world_normal", "VEC3", "smooth"), ("tex_coord", "VEC2", "smooth"),
+                   ("view_depth", "FLOAT", "smooth")),
         push=(("MAT4", "world_from_object"), ("VEC4", "base_color"),
               ("VEC4", "material_params")),   # shininess, specular, alpha cutoff, has texture
         samplers=(("FLOAT_2D", "base_color_texture"),),
         frame=True,
-        outputs=(("VEC4", "out_albedo"), ("VEC4", "out_normal"), ("VEC4", "out_position")),
+        outputs=(("VEC4", "out_albedo"), ("VEC4", "out_normal"), ("FLOAT", "out_depth")),
     ),
     "shadow": dict(
         vertex="shadow_vert.glsl", fragment="shadow_frag.glsl",
@@ -133,7 +134,7 @@ PROGRAMS = {
         interface=(("screen_uv", "VEC2", "smooth"),),
         push=(),
         samplers=(("FLOAT_2D", "gbuffer_albedo"), ("FLOAT_2D", "gbuffer_normal"),
-                  ("FLOAT_2D", "gbuffer_position"), ("FLOAT_2D", "shadow_atlas")),
+                  ("FLOAT_2D", "gbuffer_depth"), ("FLOAT_2D", "shadow_atlas")),
         frame=True,
         outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
     ),
@@ -147,6 +148,13 @@ PROGRAMS = {
         outputs=(("VEC4", "out_color"),),
     ),
 }
+
+# NOTE: a fragment shader that may ``discard`` turns off the rasterizer's early depth test,
+# so every hidden fragment runs the whole shader (llvmpipe: about half the G-buffer cost).
+# Opaque materials therefore draw with programs that cannot discard; alpha-masked
+# (cut-out) materials use these variants, compiled from the same files with ALPHA_MASK.
+for _name in ("gbuffer", "shadow"):
+    PROGRAMS[_name + "_masked"] = dict(PROGRAMS[_name], defines=(("ALPHA_MASK", "1"),))
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
 
@@ -269,6 +277,8 @@ def _build(program_name, spec, directory):
     info.define("MAX_CASCADES", str(MAX_CASCADES))
     info.define("MAX_POINT_LIGHTS", str(MAX_POINT_LIGHTS))
     info.define("MAX_SPOT_LIGHTS", str(MAX_SPOT_LIGHTS))
+    for name, value in spec.get("defines", ()):
+        info.define(name, value)
     info.vertex_source(vertex)
     info.fragment_source(fragment)
 

@@ -24,13 +24,28 @@ bool shadow_map_uv(vec2 pixel, out vec2 uv)
   return all(greaterThanEqual(uv, vec2(0.0))) && all(lessThanEqual(uv, vec2(1.0)));
 }
 
+/* World position of the pixel at this view depth. On the line through the pixel from the
+ * near to the far plane, view depth is linear in the line parameter for perspective and
+ * orthographic cameras alike, so one mix() finds the point. */
+vec3 world_position_at(vec2 uv, float view_depth)
+{
+  vec2 ndc = uv * 2.0 - 1.0;
+  vec4 a = frame.world_from_clip * vec4(ndc, -1.0, 1.0);
+  vec4 b = frame.world_from_clip * vec4(ndc, 1.0, 1.0);
+  vec3 near_point = a.xyz / a.w;
+  vec3 far_point = b.xyz / b.w;
+  float near_depth = dot(near_point - frame.camera_position.xyz, frame.camera_forward.xyz);
+  float far_depth = dot(far_point - frame.camera_position.xyz, frame.camera_forward.xyz);
+  return mix(near_point, far_point, (view_depth - near_depth) / (far_depth - near_depth));
+}
+
 void main()
 {
   vec2 pixel = screen_uv * frame.viewport.xy;
   ivec2 px = ivec2(pixel);
   vec4 albedo_spec = texelFetch(gbuffer_albedo, px, 0);
   vec4 normal_shine = texelFetch(gbuffer_normal, px, 0);
-  vec4 position = texelFetch(gbuffer_position, px, 0);
+  float depth = texelFetch(gbuffer_depth, px, 0).r;
   int debug_view = int(frame.debug_params.x);
   int shadow_tile_count = int(frame.shadow_params.x) + int(frame.bias_params.y);
 
@@ -49,21 +64,21 @@ void main()
     }
   }
 
-  if (position.w < 0.5) {
+  if (depth <= 0.0) {
     /* Background: the World colour; alpha 0 with Film > Transparent. */
     out_color = vec4(frame.background.rgb, frame.ambient.a);
     out_aux = vec4(1.0, -1.0, 1e10, 0.0);
     return;
   }
 
-  vec3 p = position.xyz;
+  vec3 p = world_position_at(screen_uv, depth);
   vec3 n = normalize(normal_shine.xyz);
   vec3 albedo = albedo_spec.rgb;
   float specular = albedo_spec.a;
   float shininess = normal_shine.w;
   vec3 to_camera = frame.camera_position.w > 0.5 ? normalize(frame.camera_position.xyz - p) :
                                                    -frame.camera_forward.xyz;
-  float view_depth = dot(p - frame.camera_position.xyz, frame.camera_forward.xyz);
+  float view_depth = depth;
 
   vec3 color = frame.ambient.rgb * albedo;
 
