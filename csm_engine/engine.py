@@ -18,6 +18,15 @@ from . import mesh_cache, pipeline, shaders, snapshot
 LAST_RENDER = {"error": None, "warnings": [], "timings": {}, "keep_images": False,
                "images": None, "plan": None}
 
+# Render targets and shadow atlas kept from one final render to the next (each render gets
+# a new engine instance and GPU context; textures, unlike framebuffers, may be shared).
+_FINAL_RENDER_TEXTURES = {}
+
+
+def _wants_normal_pass(depsgraph):
+    layer = depsgraph.view_layer
+    return bool(getattr(layer, "use_pass_normal", False))
+
 
 def _write_pass(render_pass, pixels):
     """Copy an (H, W, C) float32 array into a RenderResult pass (3.4 .. 5.x)."""
@@ -79,10 +88,11 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         self.update_progress(0.3)
         self.update_stats("CSM", f"Drawing {sum(m.triangle_count for m in cache.meshes.values())}"
                                  " triangles")
-        renderer = pipeline.Pipeline()
+        renderer = pipeline.Pipeline(textures=_FINAL_RENDER_TEXTURES)
         try:
             images, plan = renderer.render_offscreen(
-                snap, cache, with_positions=LAST_RENDER["keep_images"])
+                snap, cache, with_positions=LAST_RENDER["keep_images"],
+                with_normals=LAST_RENDER["keep_images"] or _wants_normal_pass(depsgraph))
         except shaders.ShaderCompileError as error:
             self._fail(str(error))
             return
@@ -98,8 +108,11 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         passes = result.layers[0].passes
         aux = images["aux"]
         _write_pass(passes["Combined"], images["combined"])
-        for name, pixels in (("Depth", aux[..., 2:3]), ("Normal", images["normal"][..., :3]),
-                             ("Shadow", aux[..., 0:1]), ("Cascade", aux[..., 1:2])):
+        pass_pixels = {"Depth": aux[..., 2:3], "Shadow": aux[..., 0:1],
+                       "Cascade": aux[..., 1:2]}
+        if "normal" in images:       # read back only when the Normal pass is on
+            pass_pixels["Normal"] = images["normal"][..., :3]
+        for name, pixels in pass_pixels.items():
             render_pass = passes.find_by_name(name, "")
             if render_pass is not None:
                 _write_pass(render_pass, pixels)

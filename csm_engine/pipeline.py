@@ -270,8 +270,10 @@ def _column_major(matrix):
 class Pipeline:
     """GPU resources and passes for one engine instance (one GPU context)."""
 
-    def __init__(self):
-        self._textures = {}
+    def __init__(self, textures=None):
+        # Textures may be shared between GPU contexts (framebuffers may not), so final
+        # renders pass one long-lived dict and skip reallocating ~80 MB of targets per frame.
+        self._textures = {} if textures is None else textures
         self._framebuffers = {}
         self._fullscreen = None
         self._white = None
@@ -524,7 +526,7 @@ class Pipeline:
         batch.draw(shader)
 
     # -- read-back for final renders -----------------------------------------------------
-    def render_offscreen(self, snap, cache, with_positions=False):
+    def render_offscreen(self, snap, cache, with_positions=False, with_normals=True):
         """Draw into offscreen float targets and read back (combined, aux, normal, and the
         G-buffer's world positions when asked: tests ray-cast from them)."""
         import gpu
@@ -538,7 +540,9 @@ class Pipeline:
         t = time.perf_counter()
         out = {}
         count = width * height * 4
-        reads = [("combined", target, 0), ("aux", target, 1), ("normal", self.gbuffer_fb, 1)]
+        reads = [("combined", target, 0), ("aux", target, 1)]
+        if with_normals or with_positions:
+            reads.append(("normal", self.gbuffer_fb, 1))
         for name, fb, slot in reads:
             buffer = gpu.types.Buffer('FLOAT', count)
             with fb.bind():
