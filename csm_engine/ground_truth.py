@@ -295,12 +295,20 @@ def _render_cycles(scene, changes, path):
     return rgb
 
 
-def measure(scene, width, height, heatmap_path=None):
-    """Render ``scene`` four times and compare CSM's sun visibility with Cycles'.
+@dataclasses.dataclass
+class EngineVisibility:
+    """One engine's sun visibility at one image size: ``vis`` (H, W) on / off, ``lit``
+    (H, W) the pixels the sun lights with shadows off; ``aux`` is CSM's auxiliary target
+    (None for Cycles). Rows run bottom-to-top as GL and Blender store them."""
+    vis: np.ndarray
+    lit: np.ndarray
+    aux: object = None
 
-    Returns a ``Comparison``; writes the heat map (PNG) when ``heatmap_path`` is given.
-    The scene is left as it was found.
-    """
+
+@contextlib.contextmanager
+def _isolated(scene, width, height):
+    """The measurement set-up (only CSM's sun, black world, ``width`` x ``height``);
+    yields (sun, changes) and puts everything back afterwards."""
     changes = _Changes()
     engine_before = scene.render.engine
     try:
@@ -311,37 +319,64 @@ def measure(scene, width, height, heatmap_path=None):
             changes.set(cycles_light, "cast_shadow", cycles_light.cast_shadow)
         changes.set(scene.render, "resolution_x", width)
         changes.set(scene.render, "resolution_y", height)
+        yield sun, changes
+    finally:
+        changes.restore()
+        scene.render.engine = engine_before
 
+
+def csm_visibility(scene, width, height):
+    """Render CSM twice (sun shadows on, off) with the scene's current CSM settings."""
+    with _isolated(scene, width, height) as (sun, _changes):
         _set_sun_shadow(sun, True)
         csm_on, aux = _render_csm(scene)
         _set_sun_shadow(sun, False)
         csm_off, _ = _render_csm(scene)
+    off_sum = csm_off.sum(axis=2)
+    # CSM's coverage channel is 0 on the background, whatever the colour says.
+    return EngineVisibility(vis=visibility_from_on_off(csm_on.sum(axis=2), off_sum),
+                            lit=lit_mask(off_sum) & (aux[..., 3] > 0.5), aux=aux)
 
+
+def cycles_visibility(scene, width, height):
+    """The reference: render Cycles twice (sun shadows on, off). It does not depend on any
+    CSM setting, so one reference serves every CSM setting on the same scene and size."""
+    with _isolated(scene, width, height) as (sun, changes):
         _setup_cycles(scene, changes)
         with tempfile.TemporaryDirectory(prefix="csm_ground_truth_") as folder:
             _set_sun_shadow(sun, True)
             cycles_on = _render_cycles(scene, changes, os.path.join(folder, "on.exr"))
             _set_sun_shadow(sun, False)
             cycles_off = _render_cycles(scene, changes, os.path.join(folder, "off.exr"))
-    finally:
-        changes.restore()
-        scene.render.engine = engine_before
+    off_sum = cycles_off.sum(axis=2)
+    return EngineVisibility(vis=visibility_from_on_off(cycles_on.sum(axis=2), off_sum),
+                            lit=lit_mask(off_sum))
 
-    csm_off_sum, cycles_off_sum = csm_off.sum(axis=2), cycles_off.sum(axis=2)
-    csm_vis = visibility_from_on_off(csm_on.sum(axis=2), csm_off_sum)
-    cycles_vis = visibility_from_on_off(cycles_on.sum(axis=2), cycles_off_sum)
-    # CSM's coverage channel is 0 on the background, whatever the colour says.
-    csm_lit = lit_mask(csm_off_sum) & (aux[..., 3] > 0.5)
-    cycles_lit = lit_mask(cycles_off_sum)
-    result, classes = compare(csm_vis, cycles_vis, csm_lit, cycles_lit)
 
-    compared = csm_lit & cycles_lit
-    aux_vis = aux[..., 0]
+def compare_engines(csm, cycles):
+    """Compare CSM's ``EngineVisibility`` with Cycles'; returns (Comparison, class image
+    with rows bottom-to-top), including the aux cross-check."""
+    result, classes = compare(csm.vis, cycles.vis, csm.lit, cycles.lit)
+    compared = csm.lit & cycles.lit
+    aux_vis = csm.aux[..., 0]
     result.aux_classified_differently = int(
-        ((aux_vis < SHADOWED_BELOW) != (csm_vis < SHADOWED_BELOW))[compared].sum())
-    result.aux_max_difference = float(np.abs(aux_vis - csm_vis)[compared].max()) \
+        ((aux_vis < SHADOWED_BELOW) != (csm.vis < SHADOWED_BELOW))[compared].sum())
+    result.aux_max_difference = float(np.abs(aux_vis - csm.vis)[compared].max()) \
         if compared.any() else 0.0
+    return result, classes
 
+
+def measure(scene, width, height, heatmap_path=None):
+    """Render ``scene`` four times and compare CSM's sun visibility with Cycles'.
+
+    Returns a ``Comparison``; writes the heat map (PNG) when ``heatmap_path`` is given.
+    The scene is left as it was found. To compare many CSM settings on one scene, call
+    ``cycles_visibility`` once and ``csm_visibility`` + ``compare_engines`` per setting
+    (``quality_report.py`` does).
+    """
+    csm = csm_visibility(scene, width, height)
+    cycles = cycles_visibility(scene, width, height)
+    result, classes = compare_engines(csm, cycles)
     if heatmap_path:
         write_png(heatmap_path, heatmap(classes)[::-1])   # PNG rows run top to bottom
     return result
