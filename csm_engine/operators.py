@@ -10,6 +10,7 @@ The first-person movement is plain numpy math (``step``, ``turn``) on a world_fr
 window; the modal operator only feeds it key states and mouse motion.
 """
 
+import contextlib
 import math
 import os
 import time
@@ -23,6 +24,21 @@ from mathutils import Matrix
 from . import light_controls, scene_builder
 
 
+@contextlib.contextmanager
+def keeping_render_engines():
+    """Put back every scene's render engine after an import: Blender 3.4's glTF importer
+    switches the current scene to Eevee unless it renders with Cycles or Eevee, so
+    importing or reloading (Ctrl+R) a glTF scene would silently leave the CSM engine."""
+    engines = {scene.name_full: scene.render.engine for scene in bpy.data.scenes}
+    try:
+        yield
+    finally:
+        for scene in bpy.data.scenes:
+            engine = engines.get(scene.name_full)
+            if engine is not None and scene.render.engine != engine:
+                scene.render.engine = engine
+
+
 class CSM_OT_import_scene(bpy.types.Operator, ImportHelper):
     """Import a CSM/CS562 JSON scene (camera, sun, point lights and meshes)"""
     bl_idname = "csm.import_scene"
@@ -34,7 +50,8 @@ class CSM_OT_import_scene(bpy.types.Operator, ImportHelper):
 
     def execute(self, context):
         try:
-            collection = scene_builder.import_scene_file(self.filepath, context.scene)
+            with keeping_render_engines():
+                collection = scene_builder.import_scene_file(self.filepath, context.scene)
         except scene_builder.SceneImportError as err:
             self.report({'ERROR'}, str(err))
             return {'CANCELLED'}
@@ -66,7 +83,8 @@ object (or the most recent import)"""
             self.report({'ERROR'}, "No imported CSM scene to reload in this scene")
             return {'CANCELLED'}
         try:
-            collection = scene_builder.reload_scene(collection)
+            with keeping_render_engines():
+                collection = scene_builder.reload_scene(collection)
         except scene_builder.SceneImportError as err:
             self.report({'ERROR'}, str(err))
             return {'CANCELLED'}

@@ -10,9 +10,12 @@ driver checks Blender's state on later ticks, once Blender has handled the event
 2. ``panel``: import the default scene, CSM rendered view through the camera, N-panel open
    on the "CSM" tab;
 3. ``cascades``: debug view set to cascade colours;
-4. ``f5``: debug view back to Lit, F5 over the viewport (reload shaders).
-
-Not yet covered (see the test's docstring): Ctrl+R and the first-person camera.
+4. ``f5``: debug view back to Lit, F5 over the viewport (reload shaders);
+5. ``light_edited``: the Sun selected (by script), then R, Z, 4, 0, Enter over the
+   viewport: Blender's rotate operator turns it 40 degrees about world Z;
+6. ``ctrl_r``: Ctrl+R over the viewport reloads the scene file (sun back to the file);
+7. ``first_person``: Shift+F over the viewport, W held, a left-button drag, Esc; the
+   camera matrix is read after each.
 
 After each step it saves a full-window screenshot ``step_<n>_<name>.png`` and records the
 state in ``controls.json`` (with ``error`` None on success). The process ends with
@@ -139,8 +142,12 @@ def sun_travel():
 def camera_state():
     camera = bpy.context.scene.camera
     matrix = camera.matrix_world
+    from csm_engine import operators
+    yaw, pitch = operators.yaw_pitch(matrix)
     return {"name": camera.name, "location": [float(v) for v in matrix.translation],
-            "forward": [float(-matrix[i][2]) for i in range(3)]}
+            "forward": [float(-matrix[i][2]) for i in range(3)],
+            "yaw": float(yaw), "pitch": float(pitch),
+            "matrix": [[float(v) for v in row] for row in matrix]}
 
 
 def record(number, name, shot, **state):
@@ -208,8 +215,8 @@ def scenario():
                        bpy.data.cameras):
         for datablock in list(collection):
             collection.remove(datablock)
-    # Blender 3.4 drops script-made changes that have no undo step when the next
-    # undo-pushing operator runs (the import), so the render settings come after it.
+    # Blender 3.4's glTF importer switches the scene to Eevee; the CSM operators put the
+    # engine back (operators.keeping_render_engines), and the settings come after anyway.
     with bpy.context.temp_override(window=window, area=area, region=region):
         result = bpy.ops.csm.import_scene(filepath=SCENE_FILE)
     scene = bpy.context.scene
@@ -269,6 +276,82 @@ def scenario():
     yield fresh_draws(2)
     record(4, "f5", screenshot(4, "f5"), generation_before=generation,
            generation_after=shaders.LIBRARY.generation, shader_error=shaders.LIBRARY.last_error)
+
+    # 5. Turn the sun in the viewport: select it, then R, Z, 40, Enter with the mouse over
+    # the 3D View (Blender's own rotate operator, a global-Z turn = an azimuth change).
+    from csm_engine import light_controls
+    sun_before = sun_travel()
+    with bpy.context.temp_override(window=window, area=area, region=region):
+        bpy.ops.object.select_all(action='DESELECT')
+    sun_object = sun()
+    sun_object.select_set(True)
+    bpy.context.view_layer.objects.active = sun_object
+    yield fresh_draws(1)
+    mouse_to_viewport()
+    yield pause(0.2)
+    for key in ("r", "z", "4", "0", "Return"):
+        xdotool("key", key)
+        yield pause(0.1)
+    yield until("the sun turned", lambda: _angle(sun_travel(), sun_before) > 1.0)
+    yield pause(0.3)
+    yield fresh_draws(2)
+    edited = sun_travel()
+    record(5, "light_edited", screenshot(5, "light_edited"), sun_before=list(sun_before),
+           sun_after=edited, turned_degrees=_angle(edited, sun_before),
+           azimuth_elevation_before=list(light_controls.azimuth_elevation_from_travel(sun_before)),
+           azimuth_elevation_after=list(light_controls.azimuth_elevation_from_travel(edited)),
+           engine=scene.render.engine, shading=space.shading.type,
+           file_sun_direction=[float(v) for v in _file_direction()])
+
+    # 6. Ctrl+R over the viewport reloads the scene file: the sun goes back to its direction.
+    mouse_to_viewport()
+    yield pause(0.2)
+    old_sun_name = sun().name_full
+    xdotool("key", "ctrl+r")
+    yield until("Ctrl+R put the sun back",
+                lambda: sun() is not None and _angle(sun_travel(), _file_direction()) < 1e-3)
+    yield pause(0.3)
+    yield fresh_draws(2)
+    scene = bpy.context.scene
+    record(6, "ctrl_r", screenshot(6, "ctrl_r"), sun_after=sun_travel(),
+           file_sun_direction=[float(v) for v in _file_direction()],
+           sun_name_before=old_sun_name, sun_name_after=sun().name_full,
+           engine=scene.render.engine, shading=space.shading.type,
+           view_perspective=space.region_3d.view_perspective, camera=camera_state())
+
+    # 7. First person: Shift+F over the viewport, hold W, drag the mouse, Esc.
+    start = camera_state()
+    mouse_to_viewport()
+    yield pause(0.2)
+    xdotool("key", "shift+f")
+    yield until("Shift+F started the first-person camera", lambda: FIRST_PERSON["running"])
+    yield fresh_draws(1)
+    xdotool("keydown", "w")
+    yield pause(HOLD_W_S)
+    xdotool("keyup", "w")
+    yield pause(0.3)
+    yield fresh_draws(1)
+    after_w = camera_state()
+    x, y = viewport_centre_on_screen()
+    xdotool("mousedown", "1")
+    yield pause(0.1)
+    steps = 6
+    for i in range(1, steps + 1):
+        xdotool("mousemove", x + DRAG_PX[0] * i // steps, y - DRAG_PX[1] * i // steps)
+        yield pause(0.05)
+    yield pause(0.2)
+    xdotool("mouseup", "1")
+    yield pause(0.3)
+    yield fresh_draws(1)
+    after_drag = camera_state()
+    xdotool("key", "Escape")
+    yield until("Esc ended the first-person camera", lambda: not FIRST_PERSON["running"])
+    yield fresh_draws(2)
+    record(7, "first_person", screenshot(7, "first_person"), camera_before=start,
+           camera_after_w=after_w, camera_after_drag=after_drag, camera_after_esc=camera_state(),
+           invoked=FIRST_PERSON["invoked"], running=FIRST_PERSON["running"],
+           hold_w_s=HOLD_W_S, drag_px=list(DRAG_PX),
+           view_perspective=space.region_3d.view_perspective)
 
 
 
