@@ -143,7 +143,10 @@ def _plot_sweeps(points, sweeps, defaults, scenes, images):
             ax.set_title(f"{title} %")
             ax.set_xlabel(setting)
             ax.set_yscale("symlog", linthresh=0.01)
-            ax.set_ylim(bottom=0)
+            top = max((line.get_ydata().max() for line in ax.get_lines()
+                       if len(line.get_ydata()) > 2 or line.get_label() in scenes),
+                      default=1.0)
+            ax.set_ylim(0, max(top, 0.01) * 2.0)
             ax.grid(True, alpha=0.3)
             if setting == "resolution":
                 ax.set_xscale("log", base=2)
@@ -170,7 +173,8 @@ def _plot_sweeps(points, sweeps, defaults, scenes, images):
         for ax, title in zip(axes, ("false shadow (acne) %", "missed shadow (peter-panning) %")):
             ax.set_xticks(np.arange(len(names)), names, rotation=20, fontsize=8)
             ax.set_yscale("symlog", linthresh=0.01)
-            ax.set_ylim(bottom=0)
+            top = max((bar.get_height() for bar in ax.patches), default=1.0)
+            ax.set_ylim(0, max(top, 0.01) * 2.0)
             ax.set_title(title)
             ax.grid(True, axis="y", alpha=0.3)
         axes[0].legend(fontsize=8)
@@ -285,6 +289,16 @@ def write_markdown_section(path, body):
 
 
 # ------------------------------------------------------------------------------ run
+
+def _machine():
+    text = f"{os.cpu_count()} cores, {platform.system()} {platform.machine()}"
+    try:
+        import gpu
+        text += f", {gpu.platform.renderer_get()}"
+    except Exception:      # no GPU context: the renderer is unknown, the rest still holds
+        pass
+    return text
+
 
 def build_parser(prog="python -m csm_engine.quality_report"):
     parser = argparse.ArgumentParser(
@@ -409,7 +423,7 @@ def run(argv, prog="python -m csm_engine.quality_report"):
         command=command, date=datetime.date.today().isoformat(),
         resolution=f"{width}x{height}", points=len(points), renders=renders,
         runtime_s=time.monotonic() - started, blender=bpy.app.version_string,
-        machine=f"{os.cpu_count()} cores, {platform.system()} {platform.machine()}",
+        machine=_machine(),
         scenes=list(scenes), defaults=defaults, acne_scene=acne_scene)
     markdown_path = os.path.join(out_dir, "shadow-acne.md")
     write_markdown_section(markdown_path, build_markdown(
