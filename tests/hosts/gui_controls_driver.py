@@ -15,7 +15,9 @@ driver checks Blender's state on later ticks, once Blender has handled the event
    viewport: Blender's rotate operator turns it 40 degrees about world Z;
 6. ``ctrl_r``: Ctrl+R over the viewport reloads the scene file (sun back to the file);
 7. ``first_person``: Shift+F over the viewport, W held, a left-button drag, Esc; the
-   camera matrix is read after each.
+   camera matrix is read after each;
+8. ``undo``: a click on the sidebar's "Stabilize" checkbox, then Ctrl+Z, Ctrl+Shift+Z and
+   Ctrl+Z over the viewport.
 
 After each step it saves a full-window screenshot ``step_<n>_<name>.png`` and records the
 state in ``controls.json`` (with ``error`` None on success). The process ends with
@@ -45,6 +47,8 @@ DRAG_PX = (120, 40)          # mouse drag while in first person: right and up, s
 CAMERA_ZOOM_OUT = 3.0
 CSM_TAB_FROM_RIGHT_PX = 12   # the "CSM" sidebar tab, from the region's top-right corner
 CSM_TAB_FROM_TOP_PX = 160
+STABILIZE_FROM_LEFT_PX = 89  # the Cascades panel's "Stabilize" checkbox, from the sidebar's
+STABILIZE_FROM_TOP_PX = 183  # top-left corner (same fixed window, CSM tab open)
 
 sys.dont_write_bytecode = True
 if REPO not in sys.path:
@@ -352,6 +356,39 @@ def scenario():
            invoked=FIRST_PERSON["invoked"], running=FIRST_PERSON["running"],
            hold_w_s=HOLD_W_S, drag_px=list(DRAG_PX),
            view_perspective=space.region_3d.view_perspective)
+
+    # 8. Undo: click the sidebar's "Stabilize" checkbox (off), Ctrl+Z over the viewport
+    # (back on, the camera stays where first person left it), Ctrl+Shift+Z (off again),
+    # Ctrl+Z (on again) for the screenshot.
+    before_click = bpy.context.scene.csm.stabilize
+    ui_region = sidebar(area)
+    top_on_screen = window.height - (ui_region.y + ui_region.height) + window.y
+    xdotool("mousemove", window.x + ui_region.x + STABILIZE_FROM_LEFT_PX,
+            top_on_screen + STABILIZE_FROM_TOP_PX)
+    yield pause(0.2)
+    xdotool("click", "1")
+    yield until("the Stabilize click toggled it",
+                lambda: bpy.context.scene.csm.stabilize != before_click)
+    after_click = bpy.context.scene.csm.stabilize
+    yield fresh_draws(1)
+    camera_before_undo = camera_state()
+    undo_states = []
+    for keys, wanted in (("ctrl+z", before_click), ("ctrl+shift+z", after_click),
+                         ("ctrl+z", before_click)):
+        mouse_to_viewport()
+        yield pause(0.2)
+        xdotool("key", keys)
+        yield until(f"{keys} set Stabilize to {wanted}",
+                    lambda wanted=wanted: bpy.context.scene.csm.stabilize == wanted)
+        yield pause(0.3)
+        yield fresh_draws(2)
+        undo_states.append({"keys": keys, "stabilize": bpy.context.scene.csm.stabilize,
+                            "engine": bpy.context.scene.render.engine,
+                            "camera": camera_state()})
+    record(8, "undo", screenshot(8, "undo"), stabilize_before_click=before_click,
+           stabilize_after_click=after_click, camera_before_undo=camera_before_undo,
+           undo_states=undo_states, sun_travel=sun_travel(),
+           file_sun_direction=[float(v) for v in _file_direction()])
 
 
 
