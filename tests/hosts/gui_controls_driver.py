@@ -14,6 +14,7 @@ driver checks Blender's state on later ticks, once Blender has handled the event
 5. ``light_edited``: the Sun selected (by script), then R, Z, 4, 0, Enter over the
    viewport: Blender's rotate operator turns it 40 degrees about world Z;
 6. ``ctrl_r``: Ctrl+R over the viewport reloads the scene file (sun back to the file);
+   ``ctrl_r_undo``: Ctrl+Z (the turned sun is back), Ctrl+Shift+Z (the file's sun again);
 7. ``first_person``: Shift+F over the viewport, W held, a left-button drag, Esc; the
    camera matrix is read after each;
 8. ``undo``: a click on the sidebar's "Stabilize" checkbox, then Ctrl+Z, Ctrl+Shift+Z and
@@ -322,6 +323,27 @@ def scenario():
            sun_name_before=old_sun_name, sun_name_after=sun().name_full,
            engine=scene.render.engine, shading=space.shading.type,
            view_perspective=space.region_3d.view_perspective, camera=camera_state())
+
+    # 6b. Ctrl+Z over the viewport undoes the reload (the turned sun is back), Ctrl+Shift+Z
+    # redoes it (the file's sun again).
+    undo_states = []
+    for keys, wanted, number, name in (("ctrl+z", edited, 6, "ctrl_z"),
+                                       ("ctrl+shift+z", _file_direction(), 6, "ctrl_shift_z")):
+        mouse_to_viewport()
+        yield pause(0.2)
+        xdotool("key", keys)
+        yield until(f"{keys} turned the sun to {wanted}",
+                    lambda wanted=wanted: sun() is not None
+                    and _angle(sun_travel(), wanted) < 1e-3)
+        yield pause(0.3)
+        yield fresh_draws(2)
+        undo_states.append({"keys": keys, "sun": sun_travel(),
+                            "engine": bpy.context.scene.render.engine,
+                            "imported": sorted(c.name for c in bpy.data.collections
+                                               if "csm_source" in c),
+                            "screenshot": screenshot(number, name)})
+    record(6, "ctrl_r_undo", undo_states[0]["screenshot"], undo_states=undo_states,
+           sun_edited=edited, file_sun_direction=[float(v) for v in _file_direction()])
 
     # 7. First person: Shift+F over the viewport, hold W, drag the mouse, Esc.
     start = camera_state()
