@@ -11,7 +11,7 @@ driver checks Blender's state on later ticks, once Blender has handled the event
    on the "CSM" tab;
 3. ``cascades``: debug view set to cascade colours;
 4. ``f5``: debug view back to Lit, F5 over the viewport (reload shaders);
-5. ``light_edited``: the Sun selected (by script), then R, Z, 4, 0, Enter over the
+5. ``light_edited``: a click on the Sun's Outliner row, then R, Z, 4, 0, Enter over the
    viewport: Blender's rotate operator turns it 40 degrees about world Z;
 6. ``ctrl_r``: Ctrl+R over the viewport reloads the scene file (sun back to the file);
    ``ctrl_r_undo``: Ctrl+Z (the turned sun is back), Ctrl+Shift+Z (the file's sun again);
@@ -50,6 +50,8 @@ CSM_TAB_FROM_RIGHT_PX = 12   # the "CSM" sidebar tab, from the region's top-righ
 CSM_TAB_FROM_TOP_PX = 160
 STABILIZE_FROM_LEFT_PX = 89  # the Cascades panel's "Stabilize" checkbox, from the sidebar's
 STABILIZE_FROM_TOP_PX = 183  # top-left corner (same fixed window, CSM tab open)
+SUN_ROW_FROM_LEFT_PX = 100   # the Outliner's "Sun" row (fifth: Scene Collection,
+SUN_ROW_FROM_TOP_PX = 95     # Collection, default, Camera, Sun), from its top-left corner
 
 sys.dont_write_bytecode = True
 if REPO not in sys.path:
@@ -282,15 +284,21 @@ def scenario():
     record(4, "f5", screenshot(4, "f5"), generation_before=generation,
            generation_after=shaders.LIBRARY.generation, shader_error=shaders.LIBRARY.last_error)
 
-    # 5. Turn the sun in the viewport: select it, then R, Z, 40, Enter with the mouse over
-    # the 3D View (Blender's own rotate operator, a global-Z turn = an azimuth change).
+    # 5. Turn the sun in the viewport: click its row in the Outliner (selects only the Sun),
+    # then R, Z, 40, Enter with the mouse over the 3D View (Blender's own rotate operator;
+    # a turn about world Z changes the azimuth only).
     from csm_engine import light_controls
     sun_before = sun_travel()
-    with bpy.context.temp_override(window=window, area=area, region=region):
-        bpy.ops.object.select_all(action='DESELECT')
-    sun_object = sun()
-    sun_object.select_set(True)
-    bpy.context.view_layer.objects.active = sun_object
+    outliner = next(r for a in window.screen.areas if a.type == 'OUTLINER'
+                    for r in a.regions if r.type == 'WINDOW')
+    top_on_screen = window.height - (outliner.y + outliner.height) + window.y
+    xdotool("mousemove", window.x + outliner.x + SUN_ROW_FROM_LEFT_PX,
+            top_on_screen + SUN_ROW_FROM_TOP_PX)
+    yield pause(0.2)
+    xdotool("click", "1")
+    yield until("the Outliner click selected only the Sun", lambda: (
+        [o.name for o in bpy.context.scene.objects if o.select_get()] == [sun().name]
+        and bpy.context.view_layer.objects.active == sun()))
     yield fresh_draws(1)
     mouse_to_viewport()
     yield pause(0.2)
