@@ -1,8 +1,8 @@
 """The CSM controls in a real Blender window: Debian's Blender 3.4 under Xvfb, driven with
 xdotool (issue 4's GUI acceptance test): add-on, import, CSM rendered view, N-panel "CSM"
-tab clicked, cascade colours, F5, the Sun turned with R Z 40 Enter in the viewport,
-Ctrl+R (scene and sun back to the file) and its undo/redo, first-person camera (Shift+F, hold W, drag, Esc),
-undo/redo of a sidebar click (Ctrl+Z, Ctrl+Shift+Z).
+tab clicked, cascade colours, F5, the Sun clicked in the Outliner and turned with R Z 40
+Enter in the viewport, Ctrl+R (scene and sun back to the file) and its undo/redo, the
+first-person camera (Shift+F, hold W, drag, Esc), undo/redo of a sidebar click.
 
 ``gui_controls_driver.py`` runs inside Blender, sends real X key and mouse events with
 xdotool, and writes a screenshot and a JSON record per step; this file starts the X server
