@@ -291,9 +291,20 @@ def _build(program_name, spec, directory):
     if failed is not None:
         log = _map_log(captured.text, file_ids)
         errors = _error_lines(log)
+        if not any(_LOCATION.search(error) for error in errors):
+            # Blender 3.4/4.2 drop the location (see shader_diagnostics): ask the driver.
+            from . import shader_diagnostics
+            defines = [("MAX_CASCADES", MAX_CASCADES), ("MAX_POINT_LIGHTS", MAX_POINT_LIGHTS),
+                       ("MAX_SPOT_LIGHTS", MAX_SPOT_LIGHTS), *spec.get("defines", ())]
+            driver = shader_diagnostics.driver_log(
+                spec, {"vertex": vertex, "fragment": fragment}, defines,
+                FRAME_LAYOUT.glsl() if spec["frame"] else "",
+                (FRAME_LAYOUT.type_name, "frame") if spec["frame"] else None)
+            located = [e for e in _error_lines(_map_log(driver, file_ids)) if _LOCATION.search(e)]
+            errors = located or errors
         detail = "; ".join(errors[:5]) or str(failed)
         if not _LOCATION.search(detail):
-            # Some Blender versions (4.2) print no line at all: name the files at least.
+            # No location from Blender nor the driver: name the files at least.
             detail = f"in {', '.join(file_ids)}: {detail}"
         raise ShaderCompileError(f"shader '{program_name}' failed to compile: {detail}")
     # Pass through anything else the driver said (warnings), as Blender would have.
