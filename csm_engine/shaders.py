@@ -208,8 +208,9 @@ _LOCATION = re.compile(r"[\w.-]+\.glsl:\d+")
 
 
 def _error_lines(log):
-    """The compiler's error lines, each with a file:line. Blender 4.2 prints the location on
-    the line above the message (``10171 | <source>`` then ``| Error: ...``)."""
+    """The compiler's error lines, each with a file:line where the log has one. A location
+    printed on a line just above the message (``10171 | <source>`` then ``| Error: ...``)
+    is joined to it. Blender 3.4/4.2 print none at all (see shader_diagnostics)."""
     lines = log.splitlines()
     errors = []
     for index, line in enumerate(lines):
