@@ -6,11 +6,18 @@ from a ``bpy.app.timers`` callback; keys and mouse come from ``xdotool`` (real X
 through the X server, so Blender's own keymap and event handling dispatch them), and the
 driver checks Blender's state on later ticks, once Blender has handled the events:
 
-1. ``addon``: register the add-on; record the engine list and the CSM sidebar panels;
-2. ``panel``: import the default scene, CSM rendered view through the camera, N-panel open
-   on the "CSM" tab;
-3. ``cascades``: debug view set to cascade colours;
-4. ``f5``: debug view back to Lit, F5 over the viewport (reload shaders);
+1. ``addon``: F3 (menu search) "Preferences", Enter; a click on the Add-ons tab, "CSM"
+   typed in its search field, a click on the add-on's checkbox (the test installed the
+   legacy zip into the user scripts folder, not enabled); record the engine list and the
+   CSM sidebar panels;
+2. ``panel``: A and Delete over the viewport (startup objects gone); Properties > Render
+   tab > Render Engine dropdown > S (CSM); F3 "CSM Scene", Enter (File > Import > CSM
+   Scene), and in the file browser Ctrl+L, the scene file's path, Enter, Enter; then the
+   view through the camera (set by script, for a fixed framing), Z over the viewport and
+   a click on the pie's "Rendered", and a click on the sidebar's "CSM" tab;
+3. ``cascades``: the sidebar scrolled down with the wheel, a click on the Debug panel's
+   "View" dropdown and C (cascade colours); then the same with L (back to Lit);
+4. ``f5``: F5 over the viewport (reload shaders);
 5. ``light_edited``: a click on the Sun's Outliner row, then R, Z, 4, 0, Enter over the
    viewport: Blender's rotate operator turns it 40 degrees about world Z;
 6. ``ctrl_r``: Ctrl+R over the viewport reloads the scene file (sun back to the file);
@@ -46,6 +53,18 @@ SUN_TURN_DEGREES = 40.0
 HOLD_W_S = 0.5
 DRAG_PX = (120, 40)          # mouse drag while in first person: right and up, screen pixels
 CAMERA_ZOOM_OUT = 3.0
+ADDONS_TAB_FROM_TOP_PX = 189  # Preferences: the "Add-ons" section in its left column
+ADDON_SEARCH_FROM_RIGHT_PX = 90  # Preferences > Add-ons: the search field, top right
+ADDON_SEARCH_FROM_TOP_PX = 44
+ADDON_CHECKBOX_FROM_LEFT_PX = 44  # the first listed add-on's checkbox
+ADDON_CHECKBOX_FROM_TOP_PX = 75
+RENDER_TAB_FROM_TOP_PX = 62   # Properties editor: the Render tab, second icon of its tab column
+ENGINE_FIELD_FROM_TOP_PX = 54  # Render properties: the Render Engine dropdown, under the "Scene" path
+ENGINE_MENU_KEY = "s"          # the Render Engine menu's underlined key for "CSM"
+PIE_REACH_PX = 130           # how far up the mouse moves to the Z pie's top item
+SCROLL_CLICKS = 30           # wheel clicks that scroll the CSM sidebar from end to end
+DEBUG_VIEW_FROM_LEFT_PX = 150  # the Debug panel's "View" dropdown, from the sidebar's
+DEBUG_VIEW_FROM_BOTTOM_PX = 300  # bottom-left corner with the sidebar scrolled to its end
 CSM_TAB_FROM_RIGHT_PX = 12   # the "CSM" sidebar tab, from the region's top-right corner
 CSM_TAB_FROM_TOP_PX = 160
 STABILIZE_FROM_LEFT_PX = 89  # the Cascades panel's "Stabilize" checkbox, from the sidebar's
@@ -54,8 +73,8 @@ SUN_ROW_FROM_LEFT_PX = 100   # the Outliner's "Sun" row (fifth: Scene Collection
 SUN_ROW_FROM_TOP_PX = 95     # Collection, default, Camera, Sun), from its top-left corner
 
 sys.dont_write_bytecode = True
-if REPO not in sys.path:
-    sys.path.insert(0, REPO)
+# No sys.path entry for the checkout: the add-on the user enables is the copy the test
+# installed from the legacy zip into the user scripts folder.
 
 STATE = {"started": time.monotonic(), "draws": 0, "draw_error": None, "window": None,
          "area": None, "region": None, "condition": None, "condition_name": "",
@@ -112,7 +131,7 @@ def viewport_centre_on_screen():
         else region.x + region.width
     x = (region.x + right) // 2
     y = region.y + region.height // 2
-    return window.x + x, window.height - y + window.y
+    return window.x + x, screen_height() - window.y - y
 
 
 def xdotool(*args):
@@ -126,14 +145,45 @@ def mouse_to_viewport():
     return x, y
 
 
-def screenshot(number, name):
-    window, area, region = STATE["window"], STATE["area"], STATE["region"]
+def screenshot(number, name, window=None, area=None):
+    """Save window's pixels (the main window by default) to step_<number>_<name>.png."""
+    if window is None:
+        window, area, region = STATE["window"], STATE["area"], STATE["region"]
+    else:
+        region = next(r for r in area.regions if r.type == 'WINDOW')
     path = os.path.join(OUT_DIR, f"step_{number}_{name}.png")
     with bpy.context.temp_override(window=window, area=area, region=region):
         bpy.ops.screen.screenshot(filepath=path, check_existing=False)
     if not os.path.isfile(path):
         raise RuntimeError(f"screen.screenshot did not write {path}")
     return os.path.basename(path)
+
+
+def screen_top(window, region):
+    """The region's top edge in X screen pixels. Blender counts window and region positions
+    from the bottom-left: the window's from the screen's, the region's from the window's."""
+    return screen_height() - window.y - (region.y + region.height)
+
+
+def screen_height():
+    if "screen_height" not in STATE:
+        size = subprocess.run(["xdotool", "getdisplaygeometry"], check=True, timeout=10,
+                              capture_output=True, text=True, stdin=subprocess.DEVNULL)
+        STATE["screen_height"] = int(size.stdout.split()[1])
+    return STATE["screen_height"]
+
+
+def window_with(area_type):
+    """(window, area) of the first window showing an area of that type, or None."""
+    for window in bpy.context.window_manager.windows:
+        for area in window.screen.areas:
+            if area.type == area_type:
+                return window, area
+    return None
+
+
+def file_browser():
+    return window_with('FILE_BROWSER')
 
 
 def sun():
@@ -196,10 +246,65 @@ def pause(seconds):
 # --- the user's session -------------------------------------------------------------------
 
 def scenario():
+    window = bpy.context.window_manager.windows[0]
+    areas = [a for a in window.screen.areas if a.type == 'VIEW_3D']
+    area = max(areas, key=lambda a: a.width * a.height)
+    region = next(r for r in area.regions if r.type == 'WINDOW')
+    STATE.update(window=window, area=area, region=region)
+    # 1. Enable the add-on (installed from the legacy zip by the test, not enabled yet) in
+    # Edit > Preferences, reached with F3 (menu search) "Preferences" + Enter: a click on
+    # the Add-ons tab, "CSM" typed in the search field, a click on the add-on's checkbox.
+    # Xvfb has no window manager, so there is no title-bar button to close the
+    # Preferences window; the driver closes it with wm.window_close.
+    yield pause(0.5)
+    mouse_to_viewport()
+    yield pause(0.2)
+    xdotool("key", "F3")
+    yield pause(0.5)
+    xdotool("type", "--delay", 20, "Preferences")
+    yield pause(0.6)
+    xdotool("key", "Return")
+    yield until("F3 'Preferences' opened the Preferences window",
+                lambda: window_with('PREFERENCES') is not None)
+    yield pause(0.5)
+    prefs_window, prefs_area = window_with('PREFERENCES')
+    sections = next(r for r in prefs_area.regions if r.type == 'NAVIGATION_BAR')
+    prefs_main = next(r for r in prefs_area.regions if r.type == 'WINDOW')
+    screenshot(1, "preferences", prefs_window, prefs_area)
+    REPORT["preferences_window"] = {
+        "window": [prefs_window.x, prefs_window.y, prefs_window.width, prefs_window.height],
+        "sections": region_rect(sections), "main": region_rect(prefs_main)}
+    xdotool("mousemove", prefs_window.x + sections.x + sections.width // 2,
+            screen_top(prefs_window, sections) + ADDONS_TAB_FROM_TOP_PX)
+    yield pause(0.2)
+    xdotool("click", "1")
+    yield until("a click on the Add-ons tab",
+                lambda: bpy.context.preferences.active_section == 'ADDONS')
+    yield pause(0.5)
+    screenshot(1, "addons_tab", prefs_window, prefs_area)
+    xdotool("mousemove", prefs_window.x + prefs_main.x + prefs_main.width - ADDON_SEARCH_FROM_RIGHT_PX,
+            screen_top(prefs_window, prefs_main) + ADDON_SEARCH_FROM_TOP_PX)
+    yield pause(0.2)
+    xdotool("click", "1")
+    yield pause(0.3)
+    xdotool("type", "--delay", 20, "CSM")
+    xdotool("key", "Return")
+    yield until("'CSM' typed in the add-on search",
+                lambda: bpy.context.window_manager.addon_search.lower() == "csm")
+    yield pause(0.5)
+    xdotool("mousemove", prefs_window.x + prefs_main.x + ADDON_CHECKBOX_FROM_LEFT_PX,
+            screen_top(prefs_window, prefs_main) + ADDON_CHECKBOX_FROM_TOP_PX)
+    yield pause(0.2)
+    xdotool("click", "1")
+    yield until("a click on the add-on's checkbox enabled csm_engine",
+                lambda: "csm_engine" in bpy.context.preferences.addons)
+    yield pause(0.5)
+    addon_enabled = screenshot(1, "addon_enabled", prefs_window, prefs_area)
+    with bpy.context.temp_override(window=prefs_window):
+        bpy.ops.wm.window_close()
+    yield until("the Preferences window closed", lambda: window_with('PREFERENCES') is None)
     import csm_engine
     from csm_engine import ui
-    # 1. Enable the add-on.
-    csm_engine.register()
     count_view_draws()
     watch_first_person()
     engines = sorted(cls.bl_idname for cls in bpy.types.RenderEngine.__subclasses__())
@@ -208,32 +313,78 @@ def scenario():
         if cls.bl_space_type == 'VIEW_3D' and cls.bl_region_type == 'UI'
         and getattr(cls, "bl_category", "") == "CSM"
         and hasattr(bpy.types, cls.bl_idname))
-    window = bpy.context.window_manager.windows[0]
-    areas = [a for a in window.screen.areas if a.type == 'VIEW_3D']
-    area = max(areas, key=lambda a: a.width * a.height)
-    region = next(r for r in area.regions if r.type == 'WINDOW')
-    STATE.update(window=window, area=area, region=region)
     yield pause(0.2)
     record(1, "addon", screenshot(1, "addon"), engines=engines, sidebar_panels=sidebar_panels,
+           addon_file=csm_engine.__file__, addon_enabled=addon_enabled,
            window_size=[window.width, window.height])
 
-    # 2. Import the default scene, CSM rendered view through the camera, N-panel open.
-    for collection in (bpy.data.objects, bpy.data.meshes, bpy.data.materials, bpy.data.lights,
-                       bpy.data.cameras):
-        for datablock in list(collection):
-            collection.remove(datablock)
-    # Blender 3.4's glTF importer switches the scene to Eevee; the CSM operators put the
-    # engine back (operators.keeping_render_engines), and the settings come after anyway.
-    with bpy.context.temp_override(window=window, area=area, region=region):
-        result = bpy.ops.csm.import_scene(filepath=SCENE_FILE)
+    # 2. The user's set-up, all through the window: A and Delete over the viewport remove
+    # the startup cube, camera and lamp; Properties > Render tab > Render Engine dropdown >
+    # CSM; F3 (menu search) "CSM Scene" + Enter runs File > Import > CSM Scene (.json), and
+    # in its file browser Ctrl+L (edit the directory), the scene file's path, Enter (a file
+    # path typed there selects that file), Enter (import).
     scene = bpy.context.scene
-    scene.render.engine = 'CSM'
+    mouse_to_viewport()
+    yield pause(0.2)
+    xdotool("key", "a")
+    yield pause(0.2)
+    xdotool("key", "Delete")
+    yield until("A, Delete removed the startup objects", lambda: len(scene.objects) == 0)
+    properties = next(a for a in window.screen.areas if a.type == 'PROPERTIES')
+    tabs = next(r for r in properties.regions if r.type == 'NAVIGATION_BAR')
+    xdotool("mousemove", window.x + tabs.x + tabs.width // 2,
+            screen_top(window, tabs) + RENDER_TAB_FROM_TOP_PX)
+    yield pause(0.2)
+    xdotool("click", "1")
+    yield until("a click on the Render tab of the Properties editor",
+                lambda: properties.spaces.active.context == 'RENDER')
+    yield pause(0.3)
+    render_settings = next(r for r in properties.regions if r.type == 'WINDOW')
+    xdotool("mousemove", window.x + render_settings.x + render_settings.width * 3 // 4,
+            screen_top(window, render_settings) + ENGINE_FIELD_FROM_TOP_PX)
+    yield pause(0.2)
+    xdotool("click", "1")
+    yield pause(0.5)
+    engine_menu = screenshot(2, "engine_menu")
+    xdotool("key", ENGINE_MENU_KEY)
+    yield until(f"{ENGINE_MENU_KEY} in the Render Engine menu chose CSM",
+                lambda: scene.render.engine == 'CSM')
+    mouse_to_viewport()
+    yield pause(0.2)
+    xdotool("key", "F3")
+    yield pause(0.5)
+    xdotool("type", "--delay", 20, "CSM Scene")
+    yield pause(0.6)
+    search = screenshot(2, "menu_search")
+    xdotool("key", "Return")
+    yield until("F3 'CSM Scene' opened a file browser", lambda: file_browser() is not None)
+    yield pause(0.5)
+    browser_window, browser_area = file_browser()
+    browser_main = next(r for r in browser_area.regions if r.type == 'WINDOW')
+    xdotool("mousemove", browser_window.x + browser_main.x + browser_main.width // 2,
+            screen_top(browser_window, browser_main) + browser_main.height // 2)
+    yield pause(0.3)
+    xdotool("key", "ctrl+l")
+    yield pause(0.3)
+    xdotool("key", "ctrl+a")
+    xdotool("type", "--delay", 5, SCENE_FILE)
+    yield pause(0.2)
+    xdotool("key", "Return")
+    yield until("the path typed in the file browser selected default.json",
+                lambda: browser_area.spaces.active.params.filename == os.path.basename(SCENE_FILE))
+    yield pause(0.3)
+    file_chosen = screenshot(2, "file_browser", browser_window, browser_area)
+    xdotool("key", "Return")
+    yield until("Enter in the file browser imported the scene", lambda: (
+        file_browser() is None and any(o.type == 'LIGHT' for o in scene.objects)))
+    from csm_engine import scene_builder
+    imported = [{"name": c.name, "source": c.get("csm_source")}
+                for c in scene_builder.imported_collections(scene)]
     scene.render.resolution_x, scene.render.resolution_y = 1600, 900
     scene.render.dither_intensity = 0.0
     scene.view_settings.view_transform = 'Standard'
     scene.view_settings.look = 'None'
     space = area.spaces.active
-    space.shading.type = 'RENDERED'
     space.overlay.show_overlays = False
     space.show_gizmo = False
     space.show_region_toolbar = False
@@ -242,6 +393,19 @@ def scenario():
     with bpy.context.temp_override(window=window, area=area, region=region):
         bpy.ops.view3d.view_center_camera()
     space.region_3d.view_camera_zoom -= CAMERA_ZOOM_OUT
+    # Rendered shading the way a user picks it: Z over the viewport opens the shading pie,
+    # and "Rendered" is its top item (the pie lays the enum out west, east, south, north).
+    shading_before = space.shading.type
+    mouse_to_viewport()
+    yield pause(0.2)
+    xdotool("key", "z")
+    yield pause(0.4)
+    x, y = viewport_centre_on_screen()
+    xdotool("mousemove", x, y - PIE_REACH_PX)
+    yield pause(0.3)
+    xdotool("click", "1")
+    yield until("the Z pie switched the viewport to Rendered",
+                lambda: space.shading.type == 'RENDERED')
     yield fresh_draws(2)
     # The same view before the sidebar opens, so the test can see what the panel changed.
     before_sidebar = screenshot(2, "before_sidebar")
@@ -252,26 +416,57 @@ def scenario():
     # tab, so the click goes where the tab is drawn (measured on this fixed 1600x900 window
     # at the default UI scale); the test checks the screenshot shows the CSM panels.
     ui_region = sidebar(area)
-    top_on_screen = window.height - (ui_region.y + ui_region.height) + window.y
+    top_on_screen = screen_top(window, ui_region)
     xdotool("mousemove", window.x + ui_region.x + ui_region.width - CSM_TAB_FROM_RIGHT_PX,
             top_on_screen + CSM_TAB_FROM_TOP_PX)
     yield pause(0.2)
     xdotool("click", "1")
     yield pause(0.3)
     yield fresh_draws(2)
-    record(2, "panel", screenshot(2, "panel"), import_result=sorted(result),
+    record(2, "panel", screenshot(2, "panel"), imported=imported, engine_menu=engine_menu,
+           menu_search=search, file_browser=file_chosen, scene_file=SCENE_FILE,
            engine=scene.render.engine, shading=space.shading.type,
            view_perspective=space.region_3d.view_perspective,
-           before_sidebar=before_sidebar, 
+           before_sidebar=before_sidebar, shading_before=shading_before,
            sun_travel=sun_travel(),
            file_sun_direction=[float(v) for v in _file_direction()])
 
-    # 3. Cascade colours.
-    scene.csm.debug_view = 'CASCADES'
-    yield fresh_draws(2)
-    record(3, "cascades", screenshot(3, "cascades"), debug_view=scene.csm.debug_view)
-    scene.csm.debug_view = 'NONE'
-    yield fresh_draws(2)
+    # 3. Cascade colours, chosen in the sidebar's Debug panel: scroll the sidebar to its end
+    # (the Debug panel is below the fold at this window size), click the "View" dropdown
+    # and press C, the menu's underlined key for "Cascade colours". Back to "Lit" (L) the
+    # same way, then scroll back to the top for step 8's click on Stabilize.
+    ui_region = sidebar(area)
+    top_on_screen = screen_top(window, ui_region)
+    bottom_on_screen = top_on_screen + ui_region.height
+    middle = (window.x + ui_region.x + ui_region.width // 2, top_on_screen + ui_region.height // 2)
+    debug_view_field = (window.x + ui_region.x + DEBUG_VIEW_FROM_LEFT_PX,
+                        bottom_on_screen - DEBUG_VIEW_FROM_BOTTOM_PX)
+    xdotool("mousemove", *middle)
+    yield pause(0.2)
+    xdotool("click", "--repeat", SCROLL_CLICKS, "--delay", 15, "5")
+    yield pause(0.4)
+    scrolled = screenshot(3, "scrolled")
+    views = []
+    for key, wanted in (("c", 'CASCADES'), ("l", 'NONE')):
+        xdotool("mousemove", *debug_view_field)
+        yield pause(0.2)
+        xdotool("click", "1")
+        yield pause(0.5)
+        if wanted == 'CASCADES':
+            menu = screenshot(3, "debug_menu")
+        xdotool("key", key)
+        yield until(f"the Debug View menu's {key.upper()} chose {wanted}",
+                    lambda wanted=wanted: scene.csm.debug_view == wanted)
+        yield fresh_draws(2)
+        views.append(scene.csm.debug_view)
+        if wanted == 'CASCADES':
+            record(3, "cascades", screenshot(3, "cascades"), debug_view=scene.csm.debug_view,
+                   scrolled=scrolled, menu=menu)
+    xdotool("mousemove", *middle)
+    yield pause(0.2)
+    xdotool("click", "--repeat", SCROLL_CLICKS, "--delay", 15, "4")
+    yield pause(0.4)
+    REPORT["steps"][-1]["debug_view_after_l"] = views[-1]
 
     # 4. F5 over the viewport reloads the shaders.
     from csm_engine import shaders
@@ -291,7 +486,7 @@ def scenario():
     sun_before = sun_travel()
     outliner = next(r for a in window.screen.areas if a.type == 'OUTLINER'
                     for r in a.regions if r.type == 'WINDOW')
-    top_on_screen = window.height - (outliner.y + outliner.height) + window.y
+    top_on_screen = screen_top(window, outliner)
     xdotool("mousemove", window.x + outliner.x + SUN_ROW_FROM_LEFT_PX,
             top_on_screen + SUN_ROW_FROM_TOP_PX)
     yield pause(0.2)
@@ -392,7 +587,7 @@ def scenario():
     # Ctrl+Z (on again) for the screenshot.
     before_click = bpy.context.scene.csm.stabilize
     ui_region = sidebar(area)
-    top_on_screen = window.height - (ui_region.y + ui_region.height) + window.y
+    top_on_screen = screen_top(window, ui_region)
     xdotool("mousemove", window.x + ui_region.x + STABILIZE_FROM_LEFT_PX,
             top_on_screen + STABILIZE_FROM_TOP_PX)
     yield pause(0.2)

@@ -1,8 +1,11 @@
 """The CSM controls in a real Blender window: Debian's Blender 3.4 under Xvfb, driven with
-xdotool (issue 4's GUI acceptance test): add-on, import, CSM rendered view, N-panel "CSM"
-tab clicked, cascade colours, F5, the Sun clicked in the Outliner and turned with R Z 40
-Enter in the viewport, Ctrl+R (scene and sun back to the file) and its undo/redo, the
-first-person camera (Shift+F, hold W, drag, Esc), undo/redo of a sidebar click.
+xdotool (issue 4's GUI acceptance test): the add-on enabled in Preferences > Add-ons,
+CSM chosen as the render engine in Properties > Render, the default scene imported with
+F3 > "CSM Scene" and the file browser, CSM rendered view picked in the Z pie, N-panel
+"CSM" tab clicked, cascade colours picked in the sidebar's Debug dropdown, F5, the Sun
+clicked in the Outliner and turned with R Z 40 Enter in the viewport, Ctrl+R (scene and
+sun back to the file) and its undo/redo, the first-person camera (Shift+F, hold W, drag,
+Esc), undo/redo of a sidebar click.
 
 ``gui_controls_driver.py`` runs inside Blender, sends real X key and mouse events with
 xdotool, and writes a screenshot and a JSON record per step; this file starts the X server
@@ -14,6 +17,7 @@ import json
 import os
 import shutil
 import subprocess
+import zipfile
 
 import numpy as np
 import pytest
@@ -21,6 +25,7 @@ import pytest
 from tests.hosts.test_gui_viewport import (  # the same X server and Blender set-up
     BLENDER_TIMEOUT_S, SCREEN_SIZE, _blender_env, _fail, _save_preferences_without_splash,
     load_png, x_display)
+from tests.hosts.test_packaging import _manifest, _run_build
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
 
@@ -40,6 +45,14 @@ def run(x_display, hosts, tmp_path_factory):
     out_dir.mkdir()
     env = _blender_env(hosts, root, x_display)
     _save_preferences_without_splash(blender, env, str(root))
+    # Installed, not enabled: the driver enables it in Preferences > Add-ons with clicks.
+    dist = root / "dist"
+    built = _run_build(REPO, str(dist))
+    assert built.returncode == 0, f"tools/build.py failed:\n{built.stdout}{built.stderr}"
+    legacy = dist / f"csm_engine-{_manifest()['version']}-legacy.zip"
+    addons = os.path.join(env["BLENDER_USER_SCRIPTS"], "addons")
+    with zipfile.ZipFile(legacy) as archive:
+        archive.extractall(addons)
     width, height = SCREEN_SIZE
     command = [blender, "--window-geometry", "0", "0", str(width), str(height),
                "--no-window-focus", "--python", DRIVER, "--", str(out_dir)]
@@ -60,10 +73,13 @@ def run(x_display, hosts, tmp_path_factory):
               f"{report['error'] or output[-4000:]}\nimages in {out_dir}")
     steps = {step["name"]: step for step in report["steps"]}
     if os.environ.get("CSM_UPDATE_DOCS") == "1":
-        os.makedirs(DOCS_IMAGES, exist_ok=True)
-        for step in report["steps"]:
-            shutil.copyfile(out_dir / step["screenshot"],
-                            os.path.join(DOCS_IMAGES, "gui_" + step["screenshot"]))
+        # The screenshots docs/pictures.md shows, the in-between ones (menus, Preferences,
+        # file browser) included.
+        with open(os.path.join(REPO, "docs", "pictures.md")) as handle:
+            shown = handle.read()
+        for name in sorted(os.listdir(out_dir)):
+            if f"images/gui_{name}" in shown:
+                shutil.copyfile(out_dir / name, os.path.join(DOCS_IMAGES, "gui_" + name))
     return {"report": report, "steps": steps, "dir": out_dir}
 
 
@@ -86,18 +102,24 @@ def viewport_pixels(run, step):
     return crop(picture, rect, picture.shape[0])
 
 
-def test_addon_enabled_in_blender_3_4(run):
+def test_addon_enabled_in_blender_3_4(run, tmp_path_factory):
     report, step = run["report"], run["steps"]["addon"]
     assert report["blender"].startswith("3.4"), report["blender"]
+    # Enabled with clicks in Preferences > Add-ons, from the copy installed in the user
+    # scripts folder (not the checkout).
+    assert "blender-user" in step["addon_file"] and REPO not in step["addon_file"], \
+        step["addon_file"]
     assert "CSM" in step["engines"], step["engines"]
     assert len(step["sidebar_panels"]) == 7, step["sidebar_panels"]
 
 
 def test_default_scene_in_csm_rendered_view_with_the_csm_sidebar_tab(run):
     step = run["steps"]["panel"]
-    assert step["import_result"] == ["FINISHED"]
-    assert (step["engine"], step["shading"], step["view_perspective"]) == (
-        'CSM', 'RENDERED', 'CAMERA')
+    # Imported through F3 > "CSM Scene" and the file browser, from the typed path.
+    assert [c["source"] for c in step["imported"]] == [step["scene_file"]], step["imported"]
+    # Solid until the user picked "Rendered" in the Z pie.
+    assert (step["shading_before"], step["engine"], step["shading"],
+            step["view_perspective"]) == ('SOLID', 'CSM', 'RENDERED', 'CAMERA')
     np.testing.assert_allclose(step["sun_travel"], step["file_sun_direction"], atol=1e-5)
     picture = image(run, step["screenshot"])
     before = image(run, step["before_sidebar"])
@@ -119,7 +141,9 @@ def saturated_blue(pixels):
 def test_cascade_colours_are_visible(run):
     lit = viewport_pixels(run, run["steps"]["panel"])
     tinted = viewport_pixels(run, run["steps"]["cascades"])
+    # Chosen with a click on the sidebar's Debug View dropdown and C; L went back to Lit.
     assert run["steps"]["cascades"]["debug_view"] == 'CASCADES'
+    assert run["steps"]["cascades"]["debug_view_after_l"] == 'NONE'
     # Measured: lit 0%, cascade colours ~10% saturated blue (the third cascade).
     assert saturated_blue(lit) < 0.01, saturated_blue(lit)
     assert saturated_blue(tinted) > 0.03, saturated_blue(tinted)
