@@ -17,7 +17,8 @@ How each number is taken:
   then the median of N.
 - Viewport: what ``CSMRenderEngine.view_draw`` does per redraw, minus the window: snapshot,
   cache sync on an already-synced cache, then ``Pipeline.draw`` into an offscreen target.
-  "Python overhead" is snapshot + sync + the pipeline's planning (``python_setup``).
+  "Python overhead" is the same redraw with the draw and clear calls skipped: snapshot,
+  sync, planning, binding and uniforms.
 """
 
 import argparse
@@ -330,21 +331,27 @@ def viewport_cost(scene, width, height, redraws):
                engine.apply_depsgraph_updates(cache, depsgraph.updates))
     bpy.app.handlers.depsgraph_update_post.append(handler)
 
-    def redraw(camera):
-        """Returns (python seconds, submit seconds, frame seconds incl. GPU)."""
+    def redraw(camera, python_only=False):
+        """Returns (seconds until the frame is submitted, seconds incl. the GPU finishing).
+        ``python_only`` skips the draw and clear calls: what is left is the redraw's Python
+        (snapshot, cache sync, planning, binding and uniforms), timed without llvmpipe's
+        rasteriser threads competing for the two cores."""
+        renderer.skip_gpu_calls = python_only
         start = time.perf_counter()
         depsgraph = bpy.context.evaluated_depsgraph_get()
         snap = snapshot.take(depsgraph, camera, is_viewport=True)
         cache.sync(snap.mesh_sources)
         snap.mesh_sources = {}
-        read_and_sync = time.perf_counter() - start
-        with target.bind():
-            fb = gpu.state.active_framebuffer_get()
-            renderer.draw(snap, cache, None, width, height)
-            submitted = time.perf_counter() - start
-            fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')   # wait for the GPU
-        frame = time.perf_counter() - start
-        return read_and_sync + renderer.timings["python_setup"], submitted, frame
+        try:
+            with target.bind():
+                fb = gpu.state.active_framebuffer_get()
+                renderer.draw(snap, cache, None, width, height)
+                submitted = time.perf_counter() - start
+                if not python_only:
+                    fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')   # wait for the GPU
+        finally:
+            renderer.skip_gpu_calls = False
+        return submitted, time.perf_counter() - start
 
     try:
         depsgraph = bpy.context.evaluated_depsgraph_get()
@@ -365,8 +372,9 @@ def viewport_cost(scene, width, height, redraws):
             orbit[:3, 3] = turn @ orbit[:3, 3]
             camera = snapshot.CameraView(orbit, base.clip_from_view, base.is_perspective,
                                          base.clip_start, base.clip_end, width, height)
-            p, sub, f = redraw(camera)
-            python_s.append(p)
+            sub, f = redraw(camera)
+            python, _ = redraw(camera, python_only=True)
+            python_s.append(python)
             submit_s.append(sub)
             frame_s.append(f)
         camera_only_uploads = mesh_cache.UPLOADS["count"] - uploads_before

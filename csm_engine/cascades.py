@@ -493,6 +493,26 @@ def bounding_sphere(points):
     return best_centre + origin, best_radius
 
 
+# View-space slice corners (as bytes) -> their bounding sphere. The corners depend only on
+# the projection and the split distances, so a viewport redraw where only the camera moves
+# asks for the same spheres again; the exact search above costs ~0.5 ms a cascade.
+_VIEW_SPHERES = {}
+_VIEW_SPHERES_MAX = 64
+
+
+def _view_space_sphere(view_corners):
+    corners = np.ascontiguousarray(view_corners, dtype=np.float64)
+    key = corners.tobytes()
+    sphere = _VIEW_SPHERES.get(key)
+    if sphere is None:
+        if len(_VIEW_SPHERES) >= _VIEW_SPHERES_MAX:
+            _VIEW_SPHERES.clear()
+        centre, radius = bounding_sphere(corners)
+        centre.setflags(write=False)
+        sphere = _VIEW_SPHERES[key] = (centre, radius)
+    return sphere
+
+
 def round_up_radius(radius):
     """Round a cascade's sphere radius up to a step of 1/64 of its leading power of two
     (e.g. 1/64 unit for radii 1..2, 1/4 unit for 16..32).
@@ -818,7 +838,7 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
             # NOTE: the sphere is fitted in view space, where the slice does not depend on
             # the camera's position or orientation at all, so its radius (and the texel
             # size) is bit-for-bit the same while the camera turns.
-            centre_view, radius = bounding_sphere(view_corners)
+            centre_view, radius = _view_space_sphere(view_corners)
             sphere = (_transform_points(world_from_view, centre_view[None])[0], radius)
         fit = fit_cascade(corners, rotation, resolution, stabilize=stabilize,
                           occluder_margin=occluder_margin, scene_bounds=scene_bounds,

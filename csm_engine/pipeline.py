@@ -267,6 +267,12 @@ def _column_major(matrix):
     return np.asarray(matrix, dtype=np.float32).T.ravel().tolist()
 
 
+def _column_major_stack(matrices):
+    """(N, 4, 4) matrices -> N lists of 16 floats in GLSL's column-major order."""
+    matrices = np.asarray(matrices, dtype=np.float32)
+    return matrices.transpose(0, 2, 1).reshape(len(matrices), 16).tolist()
+
+
 class Pipeline:
     """GPU resources and passes for one engine instance (one GPU context)."""
 
@@ -280,6 +286,7 @@ class Pipeline:
         self.warnings = []
         self.timings = {}
         self.profile = False
+        self.skip_gpu_calls = False   # benchmark only: a frame of Python without the GPU
         self.gbuffer_fb = None      # kept after draw() for the final render's read-back
 
     # -- resources ---------------------------------------------------------------------
@@ -376,12 +383,19 @@ class Pipeline:
         frame_ubo = self._frame_ubo(frame_data)
         self.timings["python_setup"] = time.perf_counter() - start
 
+        # Once per frame: each instance's batches, opaque and alpha-masked apart, with
+        # their material inputs, and its matrix; the passes below only index into these.
+        white = self._white_texture()
+        items = self._draw_items(snap, cache, white)
+        world_from_objects = np.array([i.world_from_object for i in snap.instances],
+                                      dtype=np.float64).reshape(-1, 4, 4)
+        world_from_objects_gl = _column_major_stack(world_from_objects)
+
         # 1. Shadow atlas
         t = time.perf_counter()
         atlas_fb = self._framebuffer("atlas", depth=atlas)
-        white = self._white_texture()
         with atlas_fb.bind():
-            atlas_fb.clear(depth=1.0)
+            self._gpu_call(atlas_fb.clear, depth=1.0)
             gpu.state.depth_test_set('LESS_EQUAL')
             gpu.state.depth_mask_set(True)
             gpu.state.face_culling_set('FRONT' if snap.settings.cull_front_faces else 'NONE')
@@ -389,28 +403,24 @@ class Pipeline:
                 gpu.state.viewport_set(tile.origin[0], tile.origin[1],
                                        tile.resolution, tile.resolution)
                 visible = self._cull(snap.instances, bounds_lo_hi, tile)
+                if len(visible) == 0:
+                    continue
+                clip_from_objects = _column_major_stack(
+                    tile.clip_from_world @ world_from_objects[visible])
                 for masked in (False, True):
                     shadow = library.get("shadow_masked" if masked else "shadow")
                     shadow.bind()
-                    for index in visible:
-                        instance = snap.instances[index]
-                        mesh = cache.meshes.get(instance.key)
-                        if mesh is None:
+                    for row, index in enumerate(visible):
+                        draws = items[index][masked]
+                        if not draws:
                             continue
-                        clip_from_object = None
-                        for batch, slot in mesh.batches:
-                            texture, color, params = self._material(cache, mesh, slot, white)
-                            if (params[2] > 0.0) != masked:
-                                continue
-                            if clip_from_object is None:
-                                clip_from_object = _column_major(
-                                    tile.clip_from_world @ instance.world_from_object)
-                            shadow.uniform_float("clip_from_object", clip_from_object)
+                        shadow.uniform_float("clip_from_object", clip_from_objects[row])
+                        for batch, texture, color, params in draws:
                             if masked:   # the opaque program has no material inputs
                                 shadow.uniform_float("material_params",
                                                      (0.0, color[3], params[2], params[3]))
                                 shadow.uniform_sampler("base_color_texture", texture)
-                            batch.draw(shadow)
+                            self._gpu_call(batch.draw, shadow)
             gpu.state.face_culling_set('NONE')
         t = self._sync(atlas_fb, "shadow", t)
 
@@ -425,7 +435,7 @@ class Pipeline:
         order = _front_to_back(snap, bounds_lo_hi)
         with gbuffer_fb.bind():
             gpu.state.viewport_set(0, 0, width, height)
-            gbuffer_fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+            self._gpu_call(gbuffer_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
             gpu.state.depth_test_set('LESS_EQUAL')
             gpu.state.depth_mask_set(True)
             for masked in (False, True):
@@ -433,22 +443,15 @@ class Pipeline:
                 gbuffer.bind()
                 gbuffer.uniform_block("frame", frame_ubo)
                 for index in order:
-                    instance = snap.instances[index]
-                    mesh = cache.meshes.get(instance.key)
-                    if mesh is None:
+                    draws = items[index][masked]
+                    if not draws:
                         continue
-                    world_from_object = None
-                    for batch, slot in mesh.batches:
-                        texture, color, params = self._material(cache, mesh, slot, white)
-                        if (params[2] > 0.0) != masked:
-                            continue
-                        if world_from_object is None:
-                            world_from_object = _column_major(instance.world_from_object)
-                        gbuffer.uniform_float("world_from_object", world_from_object)
+                    gbuffer.uniform_float("world_from_object", world_from_objects_gl[index])
+                    for batch, texture, color, params in draws:
                         gbuffer.uniform_float("base_color", color)
                         gbuffer.uniform_float("material_params", params)
                         gbuffer.uniform_sampler("base_color_texture", texture)
-                        batch.draw(gbuffer)
+                        self._gpu_call(batch.draw, gbuffer)
             gpu.state.depth_test_set('NONE')
         t = self._sync(gbuffer_fb, "gbuffer", t)
 
@@ -465,7 +468,7 @@ class Pipeline:
             lighting.uniform_sampler("gbuffer_normal", normal)
             lighting.uniform_sampler("gbuffer_depth", view_depth)
             lighting.uniform_sampler("shadow_atlas", atlas)
-            self._fullscreen_batch().draw(lighting)
+            self._gpu_call(self._fullscreen_batch().draw, lighting)
             if plan.frozen_camera is not None:
                 self._draw_frozen(snap, plan)
 
@@ -479,6 +482,14 @@ class Pipeline:
         self.timings["total"] = time.perf_counter() - start
         return plan
 
+    def _gpu_call(self, call, *args, **kwargs):
+        """Every draw and clear of a frame goes through here, so that the benchmark can
+        time the frame's Python alone (``skip_gpu_calls``): on llvmpipe a draw call does
+        the vertex work on the calling thread and its rasteriser threads compete with
+        Python for the cores, so a normal frame cannot tell Python and GPU time apart."""
+        if not self.skip_gpu_calls:
+            call(*args, **kwargs)
+
     def _cull(self, instances, bounds_lo_hi, tile):
         if bounds_lo_hi is None:
             return range(0)
@@ -486,6 +497,23 @@ class Pipeline:
             return range(len(instances))
         mask = cascades.aabbs_in_cascade(bounds_lo_hi[0], bounds_lo_hi[1], tile.cascade)
         return np.nonzero(mask)[0]
+
+    def _draw_items(self, snap, cache, white):
+        """Per instance: (opaque draws, alpha-masked draws), each a list of (batch, texture,
+        base colour, material parameters); instances of one mesh share the lists."""
+        per_mesh = {}
+        items = []
+        for instance in snap.instances:
+            entry = per_mesh.get(instance.key)
+            if entry is None:
+                mesh = cache.meshes.get(instance.key)
+                entry = ([], [])
+                for batch, slot in (mesh.batches if mesh is not None else ()):
+                    texture, color, params = self._material(cache, mesh, slot, white)
+                    entry[params[2] > 0.0].append((batch, texture, color, params))
+                per_mesh[instance.key] = entry
+            items.append(entry)
+        return items
 
     def _material(self, cache, mesh, slot, white):
         """Texture, base colour and packed parameters (shininess, specular, alpha cutoff,

@@ -318,6 +318,23 @@ def test_bounding_sphere_of_a_symmetric_slice_matches_the_closed_form(near, far)
     assert radius == pytest.approx(expected_radius, rel=1e-9)
 
 
+def test_view_space_sphere_is_remembered_per_slice_and_equals_the_exact_search():
+    # A camera-only redraw asks for the same view-space slices again; the answer must be
+    # the exact sphere every time, shared read-only, and a new slice must not get an old one.
+    projection = csm.CameraProjection(fov_y=math.radians(50), aspect=16 / 9)
+    first = csm.view_slice_corners(projection, 1.0, 20.0)
+    other = csm.view_slice_corners(projection, 1.0, 21.0)
+    centre, radius = csm._view_space_sphere(first)
+    again = csm._view_space_sphere(first.copy())
+    assert again[0] is centre and again[1] == radius
+    exact = csm.bounding_sphere(first)
+    np.testing.assert_array_equal(centre, exact[0])
+    assert radius == exact[1]
+    assert csm._view_space_sphere(other)[1] == csm.bounding_sphere(other)[1] != radius
+    with pytest.raises(ValueError):
+        centre[0] = 1.0
+
+
 # ----------------------------------------------------------------------------------------
 # fitting: corners inside, snapping, rotation invariance
 # ----------------------------------------------------------------------------------------
