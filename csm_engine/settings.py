@@ -65,13 +65,17 @@ class CSMSettings(bpy.types.PropertyGroup):
     # --- Cascades -----------------------------------------------------------------------
     cascade_count: IntProperty(
         name="Cascades", default=3, min=1, max=4, update=_redraw,
-        description="Number of shadow-map cascades covering the view depth (1 to 4)")
+        description="Number of shadow-map cascades covering the view depth (1 to 4). More: "
+                    "sharper shadows near the camera, one more shadow pass each")
     split_scheme: EnumProperty(
         name="Split Scheme", items=SPLIT_SCHEMES, default='HYBRID', update=_redraw,
-        description="How the shadow distance is divided between cascades")
+        description="How the shadow distance is divided between cascades. Logarithmic "
+                    "gives the near cascades short ranges (sharp close up), uniform equal "
+                    "ranges (sharper far away)")
     split_lambda: FloatProperty(
         name="Lambda", default=0.5, min=0.0, max=1.0, update=_redraw,
-        description="Hybrid split weight: 0 = uniform, 1 = logarithmic")
+        description="Hybrid split weight, 0 to 1: 0 = uniform, 1 = logarithmic. Higher moves "
+                    "the splits toward the camera: sharper near shadows, softer far ones")
     manual_splits: FloatVectorProperty(
         name="Manual Splits", size=3, default=(0.1, 0.3, 0.6), min=0.0, max=1.0,
         update=_redraw,
@@ -88,7 +92,8 @@ class CSMSettings(bpy.types.PropertyGroup):
                     "each next cascade is half as large unless Equal Resolution is on")
     equal_resolution: BoolProperty(
         name="Equal Resolution", default=False, update=_redraw,
-        description="Give every cascade the first cascade's resolution")
+        description="Give every cascade the first cascade's resolution: sharper far shadows, "
+                    "at up to 4x the memory and fill of each halved cascade")
     stabilize: BoolProperty(
         name="Stabilize", default=True, update=_redraw,
         description="Fit each cascade with a bounding sphere and snap it to whole texels, so "
@@ -100,7 +105,8 @@ class CSMSettings(bpy.types.PropertyGroup):
                     "stopping at a hard line")
     fade_fraction: FloatProperty(
         name="Fade Fraction", default=0.1, min=0.0, max=1.0, subtype='FACTOR', update=_redraw,
-        description="Part of the shadow distance over which shadows fade out")
+        description="Part of the shadow distance (0 to 1) over which shadows fade out. "
+                    "Larger: a softer, longer fade")
 
     # --- Filtering ----------------------------------------------------------------------
     pcf_radius: IntProperty(
@@ -109,7 +115,8 @@ class CSMSettings(bpy.types.PropertyGroup):
                     "1 = 3x3, 2 = 5x5. Larger = softer edges, slower")
     pcf_pattern: EnumProperty(
         name="PCF Pattern", items=PCF_PATTERNS, default='GRID', update=_redraw,
-        description="Which neighbour taps the filter takes")
+        description="Which neighbour taps the filter takes within the PCF radius (texels). "
+                    "Fewer taps: faster, more banding on soft edges")
     blend_band: FloatProperty(
         name="Blend Band", default=2.0, min=0.0, soft_max=100.0, unit='LENGTH', update=_redraw,
         description="Width (scene units of view depth) of the cross-fade before each split. "
@@ -123,10 +130,12 @@ class CSMSettings(bpy.types.PropertyGroup):
                     "cascade's texel size). Too low: acne. Too high: peter-panning")
     slope_bias: FloatProperty(
         name="Slope Bias", default=0.25, min=0.0, soft_max=10.0, update=_redraw,
-        description="Extra depth offset in texels that grows with the surface slope to the sun")
+        description="Extra depth offset in texels that grows with the surface slope to the "
+                    "sun. Too low: acne on surfaces the sun grazes. Too high: shadows detach")
     normal_offset: FloatProperty(
         name="Normal Offset", default=0.5, min=0.0, soft_max=10.0, update=_redraw,
-        description="Moves the lookup point along the surface normal by this many texels")
+        description="Moves the lookup point along the surface normal by this many texels. "
+                    "Removes acne at grazing angles; too much shifts shadow edges")
     cull_front_faces: BoolProperty(
         name="Cull Front Faces", default=False, update=_redraw,
         description="Render back faces only into the shadow map (moves acne to the dark side; "
@@ -162,7 +171,8 @@ class CSMSettings(bpy.types.PropertyGroup):
     # --- Lighting -------------------------------------------------------------------------
     ambient_strength: FloatProperty(
         name="Ambient", default=1.0, min=0.0, soft_max=10.0, update=_redraw,
-        description="Multiplier on the World colour used as ambient light")
+        description="Multiplier (0 or more) on the World colour used as ambient light. "
+                    "Higher: brighter shadows and flatter shading; 0: shadows are black")
 
 
 classes = (CSMSettings,)

@@ -28,6 +28,17 @@ def test_settings_live_on_the_scene_with_course_defaults():
     for prop in csm.bl_rna.properties:
         if prop.identifier not in ("rna_type", "name"):
             assert prop.description, f"{prop.identifier} needs a tooltip"
+    # Numbers say their unit or range; every tooltip says more than the label does.
+    units = ("texel", "scene units", "degrees", "0 to 1", "fractions", "(1 to 4)",
+             "multiplier", "0 = nearest", "per second")
+    for prop in list(csm.bl_rna.properties) + list(bpy.context.scene.csm_light.bl_rna.properties):
+        if prop.identifier in ("rna_type", "name"):
+            continue
+        text = prop.description
+        assert len(text) > 40, f"{prop.identifier}: tooltip too short: {text!r}"
+        if prop.type in ('INT', 'FLOAT') and getattr(prop, "subtype", "") != 'DIRECTION':
+            assert any(unit in text.lower() for unit in units), \
+                f"{prop.identifier}: tooltip names no unit or range: {text!r}"
     csm.keyframe_insert("pcf_radius", frame=1)   # animatable like any property
     assert bpy.context.scene.animation_data.action is not None
 
