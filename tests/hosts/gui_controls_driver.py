@@ -17,7 +17,9 @@ driver checks Blender's state on later ticks, once Blender has handled the event
    a click on the pie's "Rendered", and a click on the sidebar's "CSM" tab;
 3. ``cascades``: the sidebar scrolled down with the wheel, a click on the Debug panel's
    "View" dropdown and C (cascade colours); then the same with L (back to Lit);
-4. ``f5``: F5 over the viewport (reload shaders);
+4. ``f5``: F5 over the viewport (reload shaders); ``f5_error``: a syntax error written
+   into the installed add-on's lighting_frag.glsl, F5 (the old shaders keep drawing, the
+   error shows); ``f5_fixed``: the file restored, F5 (the fix is picked up);
 5. ``light_edited``: a click on the Sun's Outliner row, then R, Z, 4, 0, Enter over the
    viewport: Blender's rotate operator turns it 40 degrees about world Z;
 6. ``ctrl_r``: Ctrl+R over the viewport reloads the scene file (sun back to the file);
@@ -61,6 +63,7 @@ ADDON_CHECKBOX_FROM_TOP_PX = 75
 RENDER_TAB_FROM_TOP_PX = 62   # Properties editor: the Render tab, second icon of its tab column
 ENGINE_FIELD_FROM_TOP_PX = 54  # Render properties: the Render Engine dropdown, under the "Scene" path
 ENGINE_MENU_KEY = "s"          # the Render Engine menu's underlined key for "CSM"
+AWAY_FROM_REPORT_PX = 200     # mouse move that closes Blender's report popup
 PIE_REACH_PX = 130           # how far up the mouse moves to the Z pie's top item
 SCROLL_CLICKS = 30           # wheel clicks that scroll the CSM sidebar from end to end
 DEBUG_VIEW_FROM_LEFT_PX = 150  # the Debug panel's "View" dropdown, from the sidebar's
@@ -478,6 +481,54 @@ def scenario():
     yield fresh_draws(2)
     record(4, "f5", screenshot(4, "f5"), generation_before=generation,
            generation_after=shaders.LIBRARY.generation, shader_error=shaders.LIBRARY.last_error)
+
+    # 4b. A syntax error in the add-on's lighting_frag.glsl (the installed copy), F5: the
+    # viewport keeps drawing with the previous shaders and the error shows; the file fixed
+    # again, F5 picks the fix up.
+    import csm_engine
+    shader_file = os.path.join(os.path.dirname(csm_engine.__file__), "shaders",
+                               "lighting_frag.glsl")
+    with open(shader_file, encoding="utf-8") as handle:
+        good_source = handle.read()
+    lines = good_source.splitlines()
+    broken_line = lines.index("{") + 2
+    lines.insert(broken_line - 1, "  float broken = ;")
+    generation = shaders.LIBRARY.generation
+    try:
+        with open(shader_file, "w", encoding="utf-8") as handle:
+            handle.write("\n".join(lines) + "\n")
+        mouse_to_viewport()
+        yield pause(0.2)
+        xdotool("key", "F5")
+        yield until("F5 reported the broken shader", lambda: shaders.LIBRARY.last_error)
+        draws_before = STATE["draws"]
+        yield fresh_draws(2)
+        yield pause(0.3)
+        # Blender shows the operator's error report in a popup at the mouse; moving the
+        # mouse away closes it (and a key pressed over it would go to the popup).
+        report = screenshot(4, "f5_error_report")
+        report_at = viewport_centre_on_screen()
+        x, y = report_at
+        xdotool("mousemove", x, y + AWAY_FROM_REPORT_PX)
+        yield pause(0.5)
+        yield fresh_draws(2)
+        record(4, "f5_error", screenshot(4, "f5_error"), shader_error=shaders.LIBRARY.last_error,
+               broken_line=broken_line, generation_before=generation,
+               generation_after=shaders.LIBRARY.generation,
+               draws_after_error=STATE["draws"] - draws_before,
+               draw_error=STATE["draw_error"], report_screenshot=report,
+               report_at=list(report_at))
+    finally:
+        with open(shader_file, "w", encoding="utf-8") as handle:
+            handle.write(good_source)
+    yield pause(0.2)
+    xdotool("key", "F5")
+    yield until("F5 picked up the fixed shader", lambda: (
+        shaders.LIBRARY.generation > generation and shaders.LIBRARY.last_error is None))
+    yield fresh_draws(2)
+    yield pause(0.3)
+    record(4, "f5_fixed", screenshot(4, "f5_fixed"), shader_error=shaders.LIBRARY.last_error,
+           generation_before=generation, generation_after=shaders.LIBRARY.generation)
 
     # 5. Turn the sun in the viewport: click its row in the Outliner (selects only the Sun),
     # then R, Z, 40, Enter with the mouse over the 3D View (Blender's own rotate operator;

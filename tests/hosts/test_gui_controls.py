@@ -159,6 +159,39 @@ def test_f5_over_the_viewport_reloads_the_shaders(run):
     assert np.abs(after - lit).mean() < 0.01, "the viewport changed after reloading shaders"
 
 
+def test_f5_with_a_syntax_error_keeps_the_old_shaders_drawing_and_shows_the_error(run):
+    step = run["steps"]["f5_error"]
+    assert step["generation_after"] == step["generation_before"], "broken shaders were used"
+    assert f"lighting_frag.glsl:{step['broken_line']}" in step["shader_error"], step
+    assert step["draws_after_error"] >= 2 and step["draw_error"] is None, step
+    # The viewport still shows the lit scene drawn by the previous shaders...
+    before = viewport_pixels(run, run["steps"]["f5"])
+    assert np.abs(viewport_pixels(run, step) - before).mean() < 0.01
+    # ...and Blender showed the error report in a popup at the mouse (measured: a dark band
+    # ~700 px wide with the message, where the screenshot without it shows the scene).
+    report = image(run, step["report_screenshot"])
+    shown = image(run, step["screenshot"])
+    x, y = step["report_at"]
+    band = (slice(max(y - 60, 0), y + 20), slice(max(x - 350, 0), x + 350))
+    changed = np.abs(report[band] - shown[band]).max(axis=-1) > 0.1
+    assert changed.mean() > 0.3, changed.mean()
+    # The status bar keeps the report with its red error icon (measured: ~200 red pixels
+    # in the bottom 25 rows; none without an error).
+    def red_in_status_bar(picture):
+        bar = picture[-25:, :, :3]
+        return int(((bar[..., 0] > 0.5) & (bar[..., 1] < 0.3) & (bar[..., 2] < 0.3)).sum())
+    assert red_in_status_bar(shown) > 50
+    assert red_in_status_bar(image(run, run["steps"]["f5"]["screenshot"])) == 0
+
+
+def test_f5_after_the_fix_picks_it_up(run):
+    step = run["steps"]["f5_fixed"]
+    assert step["shader_error"] is None
+    assert step["generation_after"] == step["generation_before"] + 1, step
+    before = viewport_pixels(run, run["steps"]["f5"])
+    assert np.abs(viewport_pixels(run, step) - before).mean() < 0.01
+
+
 def test_turning_the_sun_in_the_viewport_changes_the_shadows(run):
     """R, Z, 40, Enter over the 3D View with the Sun selected: a 40 degree azimuth turn."""
     step = run["steps"]["light_edited"]
