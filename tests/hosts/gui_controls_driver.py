@@ -12,8 +12,8 @@ driver checks Blender's state on later ticks, once Blender has handled the event
    CSM sidebar panels;
 2. ``panel``: A and Delete over the viewport (startup objects gone); Properties > Render
    tab > Render Engine dropdown > S (CSM); F3 "CSM Scene", Enter (File > Import > CSM
-   Scene), and in the file browser Ctrl+L, the scene file's path, Enter, Enter; then the
-   view through the camera (set by script, for a fixed framing), Z over the viewport and
+   Scene), and in the file browser Ctrl+L, the scene file's path, Enter, Enter; Numpad 0,
+   Home and a wheel step out (the camera's frame in view), Z over the viewport and
    a click on the pie's "Rendered", and a click on the sidebar's "CSM" tab;
 3. ``cascades``: the sidebar scrolled down with the wheel, a click on the Debug panel's
    "View" dropdown and C (cascade colours); then the same with L (back to Lit);
@@ -54,7 +54,7 @@ TOTAL_LIMIT_S = 100.0
 SUN_TURN_DEGREES = 40.0
 HOLD_W_S = 0.5
 DRAG_PX = (120, 40)          # mouse drag while in first person: right and up, screen pixels
-CAMERA_ZOOM_OUT = 3.0
+CAMERA_ZOOM_OUT_CLICKS = 1  # wheel steps out after Home in camera view
 ADDONS_TAB_FROM_TOP_PX = 189  # Preferences: the "Add-ons" section in its left column
 ADDON_SEARCH_FROM_RIGHT_PX = 90  # Preferences > Add-ons: the search field, top right
 ADDON_SEARCH_FROM_TOP_PX = 44
@@ -392,10 +392,17 @@ def scenario():
     space.show_gizmo = False
     space.show_region_toolbar = False
     space.show_region_tool_header = False
-    space.region_3d.view_perspective = 'CAMERA'
-    with bpy.context.temp_override(window=window, area=area, region=region):
-        bpy.ops.view3d.view_center_camera()
-    space.region_3d.view_camera_zoom -= CAMERA_ZOOM_OUT
+    # Through the imported camera: Numpad 0, Home (fit the camera frame to the view), and
+    # the wheel out a little so the whole frame shows beside the sidebar.
+    mouse_to_viewport()
+    yield pause(0.2)
+    xdotool("key", "KP_0")
+    yield until("Numpad 0 looked through the camera",
+                lambda: space.region_3d.view_perspective == 'CAMERA')
+    xdotool("key", "Home")
+    yield pause(0.3)
+    xdotool("click", "--repeat", CAMERA_ZOOM_OUT_CLICKS, "--delay", 50, "5")
+    yield pause(0.3)
     # Rendered shading the way a user picks it: Z over the viewport opens the shading pie,
     # and "Rendered" is its top item (the pie lays the enum out west, east, south, north).
     shading_before = space.shading.type
