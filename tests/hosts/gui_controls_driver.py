@@ -162,6 +162,14 @@ def screenshot(number, name, window=None, area=None):
     return os.path.basename(path)
 
 
+def click_in(window, region, x, y):
+    """Move the mouse to (x, y) pixels from the region's top-left corner and click; a
+    scenario step (``yield from click_in(...)``)."""
+    xdotool("mousemove", window.x + region.x + x, screen_top(window, region) + y)
+    yield pause(0.2)
+    xdotool("click", "1")
+
+
 def screen_top(window, region):
     """The region's top edge in X screen pixels. Blender counts window and region positions
     from the bottom-left: the window's from the screen's, the region's from the window's."""
@@ -277,28 +285,21 @@ def scenario():
     REPORT["preferences_window"] = {
         "window": [prefs_window.x, prefs_window.y, prefs_window.width, prefs_window.height],
         "sections": region_rect(sections), "main": region_rect(prefs_main)}
-    xdotool("mousemove", prefs_window.x + sections.x + sections.width // 2,
-            screen_top(prefs_window, sections) + ADDONS_TAB_FROM_TOP_PX)
-    yield pause(0.2)
-    xdotool("click", "1")
+    yield from click_in(prefs_window, sections, sections.width // 2, ADDONS_TAB_FROM_TOP_PX)
     yield until("a click on the Add-ons tab",
                 lambda: bpy.context.preferences.active_section == 'ADDONS')
     yield pause(0.5)
     screenshot(1, "addons_tab", prefs_window, prefs_area)
-    xdotool("mousemove", prefs_window.x + prefs_main.x + prefs_main.width - ADDON_SEARCH_FROM_RIGHT_PX,
-            screen_top(prefs_window, prefs_main) + ADDON_SEARCH_FROM_TOP_PX)
-    yield pause(0.2)
-    xdotool("click", "1")
+    yield from click_in(prefs_window, prefs_main, prefs_main.width - ADDON_SEARCH_FROM_RIGHT_PX,
+                        ADDON_SEARCH_FROM_TOP_PX)
     yield pause(0.3)
     xdotool("type", "--delay", 20, "CSM")
     xdotool("key", "Return")
     yield until("'CSM' typed in the add-on search",
                 lambda: bpy.context.window_manager.addon_search.lower() == "csm")
     yield pause(0.5)
-    xdotool("mousemove", prefs_window.x + prefs_main.x + ADDON_CHECKBOX_FROM_LEFT_PX,
-            screen_top(prefs_window, prefs_main) + ADDON_CHECKBOX_FROM_TOP_PX)
-    yield pause(0.2)
-    xdotool("click", "1")
+    yield from click_in(prefs_window, prefs_main, ADDON_CHECKBOX_FROM_LEFT_PX,
+                        ADDON_CHECKBOX_FROM_TOP_PX)
     yield until("a click on the add-on's checkbox enabled csm_engine",
                 lambda: "csm_engine" in bpy.context.preferences.addons)
     yield pause(0.5)
@@ -335,18 +336,13 @@ def scenario():
     yield until("A, Delete removed the startup objects", lambda: len(scene.objects) == 0)
     properties = next(a for a in window.screen.areas if a.type == 'PROPERTIES')
     tabs = next(r for r in properties.regions if r.type == 'NAVIGATION_BAR')
-    xdotool("mousemove", window.x + tabs.x + tabs.width // 2,
-            screen_top(window, tabs) + RENDER_TAB_FROM_TOP_PX)
-    yield pause(0.2)
-    xdotool("click", "1")
+    yield from click_in(window, tabs, tabs.width // 2, RENDER_TAB_FROM_TOP_PX)
     yield until("a click on the Render tab of the Properties editor",
                 lambda: properties.spaces.active.context == 'RENDER')
     yield pause(0.3)
     render_settings = next(r for r in properties.regions if r.type == 'WINDOW')
-    xdotool("mousemove", window.x + render_settings.x + render_settings.width * 3 // 4,
-            screen_top(window, render_settings) + ENGINE_FIELD_FROM_TOP_PX)
-    yield pause(0.2)
-    xdotool("click", "1")
+    yield from click_in(window, render_settings, render_settings.width * 3 // 4,
+                        ENGINE_FIELD_FROM_TOP_PX)
     yield pause(0.5)
     engine_menu = screenshot(2, "engine_menu")
     xdotool("key", ENGINE_MENU_KEY)
@@ -426,11 +422,8 @@ def scenario():
     # tab, so the click goes where the tab is drawn (measured on this fixed 1600x900 window
     # at the default UI scale); the test checks the screenshot shows the CSM panels.
     ui_region = sidebar(area)
-    top_on_screen = screen_top(window, ui_region)
-    xdotool("mousemove", window.x + ui_region.x + ui_region.width - CSM_TAB_FROM_RIGHT_PX,
-            top_on_screen + CSM_TAB_FROM_TOP_PX)
-    yield pause(0.2)
-    xdotool("click", "1")
+    yield from click_in(window, ui_region, ui_region.width - CSM_TAB_FROM_RIGHT_PX,
+                        CSM_TAB_FROM_TOP_PX)
     yield pause(0.3)
     yield fresh_draws(2)
     record(2, "panel", screenshot(2, "panel"), imported=imported, engine_menu=engine_menu,
@@ -544,11 +537,7 @@ def scenario():
     sun_before = sun_travel()
     outliner = next(r for a in window.screen.areas if a.type == 'OUTLINER'
                     for r in a.regions if r.type == 'WINDOW')
-    top_on_screen = screen_top(window, outliner)
-    xdotool("mousemove", window.x + outliner.x + SUN_ROW_FROM_LEFT_PX,
-            top_on_screen + SUN_ROW_FROM_TOP_PX)
-    yield pause(0.2)
-    xdotool("click", "1")
+    yield from click_in(window, outliner, SUN_ROW_FROM_LEFT_PX, SUN_ROW_FROM_TOP_PX)
     yield until("the Outliner click selected only the Sun", lambda: (
         [o.name for o in bpy.context.scene.objects if o.select_get()] == [sun().name]
         and bpy.context.view_layer.objects.active == sun()))
@@ -645,11 +634,7 @@ def scenario():
     # Ctrl+Z (on again) for the screenshot.
     before_click = bpy.context.scene.csm.stabilize
     ui_region = sidebar(area)
-    top_on_screen = screen_top(window, ui_region)
-    xdotool("mousemove", window.x + ui_region.x + STABILIZE_FROM_LEFT_PX,
-            top_on_screen + STABILIZE_FROM_TOP_PX)
-    yield pause(0.2)
-    xdotool("click", "1")
+    yield from click_in(window, ui_region, STABILIZE_FROM_LEFT_PX, STABILIZE_FROM_TOP_PX)
     yield until("the Stabilize click toggled it",
                 lambda: bpy.context.scene.csm.stabilize != before_click)
     after_click = bpy.context.scene.csm.stabilize
