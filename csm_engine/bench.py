@@ -732,4 +732,5 @@ def main(argv=None):
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    from .cli import exit_process
+    exit_process(main())

@@ -165,3 +165,16 @@ def run_reporting_errors(run_command, argv, prog, label):
 
 def main(argv=None, prog="python -m csm_engine"):
     return run_reporting_errors(run, argv, prog, "csm")
+
+
+def exit_process(code):
+    """Leave the process with ``code``. NOTE: pip bpy 4.2 segfaults while Python shuts down
+    after any render by an engine with ``bl_use_gpu_context`` (a six-line engine does it
+    too), which would turn every exit code into 139; skipping the shutdown keeps the code.
+    5.0 exits cleanly, so it gets the normal path (and its exit handlers)."""
+    import bpy
+    if bpy.app.version < (5, 0, 0):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)

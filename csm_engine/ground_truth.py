@@ -455,18 +455,6 @@ def main(argv=None, prog="python -m csm_engine.ground_truth"):
     return run_reporting_errors(run, argv, prog, "ground truth")
 
 
-def _exit(code):
-    """Exit with ``code``. NOTE: pip bpy 4.2 segfaults while Python shuts down after any
-    render by an engine with ``bl_use_gpu_context`` (a six-line engine does it too), which
-    would turn every exit code into 139; skipping the shutdown keeps the code. 5.0 exits
-    cleanly, so it gets the normal path."""
-    import bpy
-    if bpy.app.version < (5, 0, 0):
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(code)
-    sys.exit(code)
-
-
 if __name__ == "__main__":
-    _exit(main())
+    from .cli import exit_process
+    exit_process(main())

@@ -445,4 +445,5 @@ def main(argv=None, prog="python -m csm_engine.quality_report"):
 
 
 if __name__ == "__main__":
-    ground_truth._exit(main())
+    from .cli import exit_process
+    exit_process(main())

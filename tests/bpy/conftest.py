@@ -15,6 +15,23 @@ if REPO not in sys.path:
 import bpy  # noqa: E402
 
 
+_EXIT_STATUS = {}
+
+
+def pytest_sessionfinish(session, exitstatus):
+    _EXIT_STATUS["code"] = int(exitstatus)
+
+
+def pytest_unconfigure(config):
+    # pip bpy 4.2 segfaults while Python shuts down after a GPU-context render, which would
+    # turn the suite's exit code into 139; leave with pytest's own code once it has printed
+    # everything (see csm_engine.cli.exit_process). 5.0 shuts down cleanly.
+    if bpy.app.version < (5, 0, 0) and "code" in _EXIT_STATUS:
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(_EXIT_STATUS["code"])
+
+
 @pytest.fixture(scope="session", autouse=True)
 def csm_registered():
     import csm_engine
