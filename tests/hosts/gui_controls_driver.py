@@ -14,7 +14,7 @@ driver checks Blender's state on later ticks, once Blender has handled the event
    tab > Render Engine dropdown > S (CSM); F3 "CSM Scene", Enter (File > Import > CSM
    Scene), and in the file browser Ctrl+L, the scene file's path, Enter, Enter; Numpad 0,
    Home and a wheel step out (the camera's frame in view), Z over the viewport and
-   a click on the pie's "Rendered", and a click on the sidebar's "CSM" tab;
+   a click on the pie's "Rendered", N (the sidebar), and a click on its "CSM" tab;
 3. ``cascades``: the sidebar scrolled down with the wheel, a click on the Debug panel's
    "View" dropdown and C (cascade colours); then the same with L (back to Lit);
 4. ``f5``: F5 over the viewport (reload shaders); ``f5_error``: a syntax error written
@@ -28,6 +28,12 @@ driver checks Blender's state on later ticks, once Blender has handled the event
    camera matrix is read after each;
 8. ``undo``: a click on the sidebar's "Stabilize" checkbox, then Ctrl+Z, Ctrl+Shift+Z and
    Ctrl+Z over the viewport.
+
+Set by script, not by key or click: the render size (1600x900, the window's aspect),
+dithering off and the Standard view transform (so pictures compare pixel for pixel),
+overlays, gizmos and the toolbars hidden (clean screenshots), the Preferences window closed
+(Xvfb has no window manager to give it a close button), and the broken and fixed shader
+file written in step 4 (a user's text editor).
 
 After each step it saves a full-window screenshot ``step_<n>_<name>.png`` and records the
 state in ``controls.json`` (with ``error`` None on success). The process ends with
@@ -415,7 +421,11 @@ def scenario():
     yield fresh_draws(2)
     # The same view before the sidebar opens, so the test can see what the panel changed.
     before_sidebar = screenshot(2, "before_sidebar")
-    space.show_region_ui = True
+    sidebar_before_n = space.show_region_ui
+    mouse_to_viewport()
+    yield pause(0.2)
+    xdotool("key", "n")
+    yield until("N over the viewport opened the sidebar", lambda: space.show_region_ui)
     yield fresh_draws(2)
     # The sidebar opens on its first tab ("Item"); a user clicks the "CSM" tab, the fourth
     # of the vertical tabs on its right edge. Blender 3.4 has no Python access to the active
@@ -431,6 +441,7 @@ def scenario():
            engine=scene.render.engine, shading=space.shading.type,
            view_perspective=space.region_3d.view_perspective,
            before_sidebar=before_sidebar, shading_before=shading_before,
+           sidebar_before_n=sidebar_before_n,
            sun_travel=sun_travel(),
            file_sun_direction=[float(v) for v in _file_direction()])
 

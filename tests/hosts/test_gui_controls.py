@@ -125,6 +125,7 @@ def test_default_scene_in_csm_rendered_view_with_the_csm_sidebar_tab(run):
     before = image(run, step["before_sidebar"])
     rect = step["sidebar_region"]
     assert rect["width"] > 150, rect
+    assert step["sidebar_before_n"] is False and step["sidebar_shown"], step
     opened = np.abs(crop(picture, rect, picture.shape[0]) - crop(before, rect, before.shape[0]))
     # The sidebar is drawn over the viewport (region overlap); measured: 45% of its pixels
     # change by more than 0.1 when it opens (panel boxes, text, the CSM tab's widgets).
