@@ -31,7 +31,6 @@ import datetime
 import json
 import os
 import platform
-import sys
 import tempfile
 import time
 
