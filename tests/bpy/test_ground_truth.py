@@ -14,6 +14,7 @@ import bpy
 import numpy as np
 import pytest
 
+from bpy_helpers import read_png
 from csm_engine import ground_truth
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -41,18 +42,6 @@ def run_tool(tmp_dir, scene, *overrides):
             numbers = json.load(stream)
         _RUNS[key] = numbers, read_png(heatmap_path)
     return _RUNS[key]
-
-
-def read_png(path):
-    image = bpy.data.images.load(path, check_existing=False)
-    try:
-        width, height = image.size
-        pixels = np.empty(width * height * image.channels, dtype=np.float32)
-        image.pixels.foreach_get(pixels)
-    finally:
-        bpy.data.images.remove(image)
-    rgb = pixels.reshape(height, width, -1)[..., :3]
-    return np.round(rgb * 255.0).astype(np.uint8)[::-1]   # Blender's rows run bottom-up
 
 
 def count_color(image, color):

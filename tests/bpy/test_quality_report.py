@@ -10,6 +10,7 @@ import os
 import numpy as np
 import pytest
 
+from bpy_helpers import read_png
 from csm_engine import ground_truth, quality_report
 
 PROSE_BEFORE = "# Shadow acne\n\nHand-written prose that the tool must keep.\n\n"
@@ -59,10 +60,10 @@ def test_no_bias_shows_more_false_shadow_than_defaults(quick_run):
     assert none["false_shadow_pixels"] > 100
     assert none["false_shadow_percent"] > 10 * max(defaults["false_shadow_percent"], 0.1)
     # The heat maps show the same pixels: red = false shadow.
-    heat = _read_png(out / "images" / "acne_none.png")
+    heat = read_png(out / "images" / "acne_none.png")
     red = np.all(heat == np.array(ground_truth.COLOR_FALSE_SHADOW, np.uint8), axis=2).sum()
     assert red == none["false_shadow_pixels"]
-    heat = _read_png(out / "images" / "acne_defaults.png")
+    heat = read_png(out / "images" / "acne_defaults.png")
     red = np.all(heat == np.array(ground_truth.COLOR_FALSE_SHADOW, np.uint8), axis=2).sum()
     assert red == defaults["false_shadow_pixels"]
 
@@ -76,16 +77,3 @@ def test_markdown_section_is_rewritten_and_prose_kept(quick_run):
     none = _point(report, "none")["result"]
     assert f"{none['false_shadow_percent']:.3f}" in text
     assert "images/acne_none.png" in text
-
-
-def _read_png(path):
-    import bpy
-    image = bpy.data.images.load(str(path), check_existing=False)
-    try:
-        width, height = image.size
-        pixels = np.empty(width * height * image.channels, dtype=np.float32)
-        image.pixels.foreach_get(pixels)
-    finally:
-        bpy.data.images.remove(image)
-    rgb = pixels.reshape(height, width, -1)[..., :3]
-    return np.round(rgb * 255.0).astype(np.uint8)[::-1]
