@@ -168,6 +168,17 @@ def screenshot(number, name, window=None, area=None):
     return os.path.basename(path)
 
 
+def menu_search(text):
+    """F3 over the viewport (menu search) and ``text`` typed; the caller presses Enter.
+    A scenario step (``yield from menu_search(...)``)."""
+    mouse_to_viewport()
+    yield pause(0.2)
+    xdotool("key", "F3")
+    yield pause(0.5)
+    xdotool("type", "--delay", 20, text)
+    yield pause(0.6)
+
+
 def click_in(window, region, x, y):
     """Move the mouse to (x, y) pixels from the region's top-left corner and click; a
     scenario step (``yield from click_in(...)``)."""
@@ -274,12 +285,7 @@ def scenario():
     # Xvfb has no window manager, so there is no title-bar button to close the
     # Preferences window; the driver closes it with wm.window_close.
     yield pause(0.5)
-    mouse_to_viewport()
-    yield pause(0.2)
-    xdotool("key", "F3")
-    yield pause(0.5)
-    xdotool("type", "--delay", 20, "Preferences")
-    yield pause(0.6)
+    yield from menu_search("Preferences")
     xdotool("key", "Return")
     yield until("F3 'Preferences' opened the Preferences window",
                 lambda: window_with('PREFERENCES') is not None)
@@ -354,12 +360,7 @@ def scenario():
     xdotool("key", ENGINE_MENU_KEY)
     yield until(f"{ENGINE_MENU_KEY} in the Render Engine menu chose CSM",
                 lambda: scene.render.engine == 'CSM')
-    mouse_to_viewport()
-    yield pause(0.2)
-    xdotool("key", "F3")
-    yield pause(0.5)
-    xdotool("type", "--delay", 20, "CSM Scene")
-    yield pause(0.6)
+    yield from menu_search("CSM Scene")
     search = screenshot(2, "menu_search")
     xdotool("key", "Return")
     yield until("F3 'CSM Scene' opened a file browser", lambda: file_browser() is not None)
