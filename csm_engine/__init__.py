@@ -21,7 +21,7 @@ _MODULES = ("settings", "light_controls", "engine", "operators", "keymap", "ui")
 
 def _modules():
     import importlib
-    return [importlib.import_module("." + name, __name__) for name in _MODULES]
+    return [importlib.import_module(".blender." + name, __name__) for name in _MODULES]
 
 
 def register():

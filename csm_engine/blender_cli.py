@@ -8,7 +8,7 @@ import sys
 
 if __name__ == "__main__":
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    from csm_engine.cli import main
+    from csm_engine.blender.cli import main
 
     argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
     code = main(argv, prog="blender -b -P blender_cli.py --")

@@ -1,26 +1,27 @@
 """Helpers shared by the in-process bpy tests (imported by name: several test folders have
 a conftest.py, so ``from conftest import ...`` would depend on which one loaded last)."""
-import os
-
 import bpy
 import numpy as np
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from tests.conftest import REPO  # noqa: F401 (re-exported for the bpy tests)
+
+
+def render_result(scene, width=320, height=240):
+    """Render with CSM; returns the ``RenderResult`` with its passes as (H, W, C) float
+    arrays, top row first (as the PNG shows it): "combined" RGBA, "aux" (sun visibility,
+    cascade, view depth, coverage), "normal", "position". ``.plan`` holds the cascades used,
+    ``.warnings`` what the render said."""
+    from csm_engine.blender import engine
+    scene.render.resolution_x, scene.render.resolution_y = width, height
+    result = engine.render_final(scene, keep_images=True)
+    assert result.error is None, result.error
+    result.images = {name: image[::-1] for name, image in result.images.items()}
+    return result
 
 
 def render_scene(scene, width=320, height=240):
-    """Render with CSM; returns the passes as (H, W, C) float arrays, top row first (as the
-    PNG shows it): "combined" RGBA, "aux" (sun visibility, cascade, view depth, coverage),
-    "normal". ``LAST_RENDER["plan"]`` holds the cascades used."""
-    from csm_engine import engine
-    scene.render.resolution_x, scene.render.resolution_y = width, height
-    engine.LAST_RENDER["keep_images"] = True
-    try:
-        bpy.ops.render.render()
-    finally:
-        engine.LAST_RENDER["keep_images"] = False
-    assert engine.LAST_RENDER["error"] is None, engine.LAST_RENDER["error"]
-    return {name: image[::-1] for name, image in engine.LAST_RENDER["images"].items()}
+    """The passes of one CSM render (see ``render_result``)."""
+    return render_result(scene, width, height).images
 
 
 def read_png(path):

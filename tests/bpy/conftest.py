@@ -8,7 +8,7 @@ import sys
 
 import pytest
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from tests.conftest import REPO
 if REPO not in sys.path:
     sys.path.insert(0, REPO)
 
@@ -25,7 +25,7 @@ def pytest_sessionfinish(session, exitstatus):
 def pytest_unconfigure(config):
     # pip bpy 4.2 segfaults while Python shuts down after a GPU-context render, which would
     # turn the suite's exit code into 139; leave with pytest's own code once it has printed
-    # everything (see csm_engine.cli.exit_process). 5.0 shuts down cleanly.
+    # everything (see csm_engine.blender.compat.exit_process). 5.0 shuts down cleanly.
     if bpy.app.version < (5, 0, 0) and "code" in _EXIT_STATUS:
         sys.stdout.flush()
         sys.stderr.flush()

@@ -22,7 +22,7 @@ import zlib
 import numpy as np
 import pytest
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from tests.conftest import REPO
 RESULT_PREFIX = "CSM_RESULT "
 HOST_TIMEOUT_S = 600
 

@@ -15,7 +15,7 @@ import pytest
 
 pytestmark = pytest.mark.hosts
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from tests.conftest import REPO
 SUITE_TIMEOUT_S = 900
 
 

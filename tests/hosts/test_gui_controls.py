@@ -29,7 +29,7 @@ from tests.hosts.test_packaging import _manifest, _run_build
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from tests.conftest import REPO
 DRIVER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "gui_controls_driver.py")
 DOCS_IMAGES = os.path.join(REPO, "docs", "images")
 _ = x_display   # a module-scoped fixture used by name below

@@ -22,7 +22,7 @@ import pytest
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from tests.conftest import REPO
 DRIVER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "gui_driver.py")
 DOCS_SCREENSHOT = os.path.join(REPO, "docs", "images", "viewport_blender34.png")
 SCREEN_SIZE = (1600, 900)

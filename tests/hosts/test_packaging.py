@@ -24,7 +24,7 @@ import pytest
 
 pytestmark = pytest.mark.hosts
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from tests.conftest import REPO
 RENDER_SIZE = (160, 120)
 # A pixel counts as lit when the sun adds at least this much to its luminance (0..1 PNG).
 LIT_THRESHOLD = 0.05
@@ -308,7 +308,7 @@ result["save_userpref"] = sorted(bpy.ops.wm.save_userpref())
 
 # The user's flow: File > Import > CSM Scene of the shipped default scene.
 def save_default_scene():
-    from csm_engine import paths
+    from csm_engine.core import paths
     # Objects are removed by hand: reading factory settings would also reset the
     # preferences and so disable the add-on just enabled.
     for obj in list(bpy.data.objects):

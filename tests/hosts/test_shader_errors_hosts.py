@@ -17,7 +17,7 @@ import pytest
 
 pytestmark = pytest.mark.hosts
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from tests.conftest import REPO
 
 CASES = (("lighting_frag.glsl", "  float broken = ;"),
          ("common.glsl", "  float broken = ;"),
@@ -30,7 +30,7 @@ argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
 work = argv[0]
 sys.path.insert(0, work)
 import bpy
-from csm_engine import shaders
+from csm_engine.render import shaders
 
 CASES = json.loads(argv[1])
 result = {"blender": bpy.app.version_string, "cases": []}

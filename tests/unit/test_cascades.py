@@ -14,7 +14,7 @@ from hypothesis import assume, given, settings, strategies as st
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
 
-from csm_engine import cascades as csm  # noqa: E402
+from csm_engine.core import cascades as csm  # noqa: E402
 
 RNG_SEED = 20261107
 TOL = 1e-9

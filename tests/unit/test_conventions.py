@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from csm_engine import conventions as cv
+from csm_engine.core import conventions as cv
 
 C = cv.zup_from_yup()
 

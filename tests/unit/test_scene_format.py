@@ -5,10 +5,10 @@ import os
 
 import pytest
 
-from csm_engine import scene_format
-from csm_engine.scene_format import SceneFormatError, parse_scene
+from csm_engine.core import scene_format
+from csm_engine.core.scene_format import SceneFormatError, parse_scene
 
-REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+from tests.conftest import REPO
 
 # The course's official CSM scene, verbatim from scene-format.md.
 SCENE_SHADOW = """{
@@ -155,7 +155,7 @@ def test_supported_mesh_types(mesh):
 
 def test_the_committed_scenes_parse():
     for name in ("default", "shadow_test", "point_lights"):
-        scene = scene_format.load_scene(os.path.join(REPO, "data", "scenes", name + ".json"))
+        scene = scene_format.load_scene(os.path.join(REPO, "csm_engine", "data", "scenes", name + ".json"))
         assert scene.objects and scene.camera is not None
 
 

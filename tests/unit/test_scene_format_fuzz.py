@@ -12,7 +12,7 @@ import math
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from csm_engine.scene_format import SUPPORTED_MESH_EXTENSIONS, SceneFormatError, parse_scene
+from csm_engine.core.scene_format import SUPPORTED_MESH_EXTENSIONS, SceneFormatError, parse_scene
 
 SOURCE = "fuzzed.json"
 

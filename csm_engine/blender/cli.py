@@ -1,0 +1,185 @@
+"""Command line: import a JSON scene, render one frame with CSM, write a PNG.
+
+Owns the course's ``argv[1]`` = scene file, ``argv[2]`` = screenshot contract, for both
+``python -m csm_engine`` (pip ``bpy``) and ``blender -b -P blender_cli.py -- ...``. Every
+user mistake ends with one line on stderr and a non-zero exit code, never a traceback.
+"""
+
+import argparse
+import os
+import sys
+
+EXIT_USAGE = 2
+EXIT_SCENE = 3
+EXIT_RENDER = 4
+
+
+class CLIError(Exception):
+    def __init__(self, message, code=EXIT_USAGE):
+        super().__init__(message)
+        self.code = code
+
+
+def build_parser(prog="python -m csm_engine"):
+    parser = argparse.ArgumentParser(
+        prog=prog,
+        description="Render a CS562-style JSON scene with the CSM engine and save a PNG.")
+    parser.add_argument("scene", nargs="?", help="scene .json (default: the bundled scene)")
+    parser.add_argument("screenshot", nargs="?", default="csm_default.png",
+                        help="PNG to write (default: csm_default.png)")
+    parser.add_argument("--resolution", default="1280x720", metavar="WxH",
+                        help="image size in pixels (default 1280x720)")
+    parser.add_argument("--set", dest="overrides", action="append", default=[],
+                        metavar="SETTING=VALUE",
+                        help="override a CSM setting, e.g. --set pcf_radius=2 "
+                             "--set debug_view=CASCADES (repeatable)")
+    parser.add_argument("--list-settings", action="store_true",
+                        help="print every setting with its default and exit")
+    return parser
+
+
+def parse_resolution(text):
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise CLIError(f"--resolution: expected WIDTHxHEIGHT like 1280x720, got '{text}'")
+    if not (1 <= width <= 16384 and 1 <= height <= 16384):
+        raise CLIError(f"--resolution: {width}x{height} is outside 1..16384 pixels")
+    return width, height
+
+
+def apply_override(csm, text):
+    """Set one CSM property from 'name=value' text with the property's own type checks."""
+    if "=" not in text:
+        raise CLIError(f"--set: expected SETTING=VALUE, got '{text}'")
+    name, value = (part.strip() for part in text.split("=", 1))
+    props = {p.identifier: p for p in csm.bl_rna.properties if p.identifier != "rna_type"}
+    prop = props.get(name)
+    if prop is None or name == "name":
+        known = ", ".join(sorted(k for k in props if k != "name"))
+        raise CLIError(f"--set: unknown setting '{name}'. Settings: {known}")
+    try:
+        if prop.type == 'BOOLEAN' and not getattr(prop, "is_array", False):
+            lowered = value.lower()
+            if lowered not in {"1", "0", "true", "false", "on", "off", "yes", "no"}:
+                raise ValueError
+            parsed = lowered in {"1", "true", "on", "yes"}
+        elif prop.type == 'ENUM':
+            items = [item.identifier for item in prop.enum_items]
+            if value.upper() not in items:
+                raise CLIError(f"--set {name}: '{value}' is not one of {', '.join(items)}")
+            parsed = value.upper()
+        elif prop.type in {'INT', 'FLOAT'}:
+            cast = int if prop.type == 'INT' else float
+            if getattr(prop, "is_array", False) and prop.array_length > 1:
+                parsed = [cast(v) for v in value.split(",")]
+                if len(parsed) != prop.array_length:
+                    raise ValueError
+                values = parsed
+            else:
+                parsed = cast(value)
+                values = [parsed]
+            for v in values:
+                if v != v or v in (float("inf"), float("-inf")):
+                    raise ValueError
+                if v < prop.hard_min or v > prop.hard_max:
+                    raise CLIError(f"--set {name}: {v} is outside {prop.hard_min:g}.."
+                                   f"{prop.hard_max:g}")
+        else:
+            raise CLIError(f"--set: setting '{name}' cannot be set from the command line")
+    except ValueError:
+        raise CLIError(f"--set {name}: '{value}' is not a valid {prop.type.lower()}"
+                       + (" list" if getattr(prop, "is_array", False) else ""))
+    setattr(csm, name, parsed)
+
+
+def ensure_registered():
+    """Register the add-on unless Blender already has it enabled (as extension or add-on)."""
+    import bpy
+    if hasattr(bpy.types.Scene, "csm") and "CSM" in {
+            getattr(e, "bl_idname", None) for e in bpy.types.RenderEngine.__subclasses__()}:
+        return
+    from .. import register
+    register()
+
+
+def open_scene(scene_path=None, overrides=(), resolution=None):
+    """The one session set-up every command shares: reset Blender to an empty factory
+    scene, register the add-on, import ``scene_path`` (None: an empty scene; "default":
+    the bundled scene), apply ``--set`` overrides, and size the render. Returns the scene.
+    A broken scene file or setting raises CLIError with a one-line reason."""
+    import bpy
+    from ..core import paths, scene_format
+    from . import scene_builder
+
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    ensure_registered()
+    scene = bpy.context.scene
+    if scene_path == "default":
+        scene_path = paths.default_scene_path()
+    if scene_path is not None:
+        try:
+            scene_builder.import_scene_file(scene_path, scene)
+        except (scene_format.SceneFormatError, scene_builder.SceneImportError) as error:
+            raise CLIError(str(error), EXIT_SCENE)
+    for override in overrides:
+        apply_override(scene.csm, override)
+    render = scene.render
+    if resolution is not None:
+        render.resolution_x, render.resolution_y = resolution
+    render.resolution_percentage = 100
+    # The course's programs show plain sRGB; Filmic/AgX would wash the image out.
+    scene.view_settings.view_transform = 'Standard'
+    return scene
+
+
+def list_settings(scene):
+    for prop in scene.csm.bl_rna.properties:
+        if prop.identifier not in ("rna_type", "name"):
+            print(f"{prop.identifier} = {getattr(scene.csm, prop.identifier)!r}"
+                  f"  # {prop.description}")
+
+
+def run(argv, prog="python -m csm_engine"):
+    parser = build_parser(prog)
+    args = parser.parse_args(argv)
+    resolution = parse_resolution(args.resolution)
+    if args.list_settings:
+        list_settings(open_scene())
+        return 0
+    shot = os.path.abspath(args.screenshot)
+    directory = os.path.dirname(shot)
+    if not os.path.isdir(directory):
+        raise CLIError(f"cannot write '{shot}': folder '{directory}' does not exist")
+
+    from . import engine
+    scene = open_scene(args.scene or "default", args.overrides, resolution)
+    render = scene.render
+    render.engine = "CSM"
+    render.image_settings.file_format = 'PNG'
+    render.image_settings.color_mode = 'RGBA' if render.film_transparent else 'RGB'
+    render.filepath = shot
+    result = engine.render_final(scene, write_still=True)
+    if result.error:
+        raise CLIError("render failed: " + result.error, EXIT_RENDER)
+    if not os.path.isfile(shot):
+        raise CLIError(f"render finished but '{shot}' was not written", EXIT_RENDER)
+    for warning in result.warnings:
+        print(f"csm: warning: {warning}", file=sys.stderr)
+    print(f"csm: wrote {shot} ({resolution[0]}x{resolution[1]})")
+    return 0
+
+
+def run_reporting_errors(run_command, argv, prog, label):
+    """Run a command-line tool; a user's mistake becomes one line on stderr and its exit
+    code. Shared by this CLI and the measuring tools."""
+    argv = sys.argv[1:] if argv is None else argv
+    try:
+        return run_command(argv, prog)
+    except CLIError as error:
+        print(f"{label}: error: {error}", file=sys.stderr)
+        return error.code
+
+
+def main(argv=None, prog="python -m csm_engine"):
+    return run_reporting_errors(run, argv, prog, "csm")

@@ -1,0 +1,129 @@
+"""Every Blender-version difference the add-on works around, in one place (3.4 .. 5.x).
+
+Owns the shims: reading mesh data through generic attributes where they exist (3.5+, one
+memory copy) and through the older per-element paths before; corner normals (4.1+) versus
+``calc_normals_split``; RenderResult passes that take a flat array (4.x+) or rows (3.4);
+the Principled BSDF's renamed specular input; the glTF importer of 3.4/3.5 that needs
+``np.bool``; and the exit that pip bpy 4.2 needs to keep a process's exit code. Callers ask
+for what they need and never test versions themselves.
+"""
+
+import os
+import sys
+
+import bpy
+import numpy as np
+
+# Principled BSDF specular: "Specular IOR Level" in 4.0+, "Specular" before.
+PRINCIPLED_SPECULAR_INPUTS = ("Specular IOR Level", "Specular")
+
+
+# -- mesh data ----------------------------------------------------------------------------
+def read_array(collection, prop, count, dtype):
+    """``collection.foreach_get(prop)`` into a new flat numpy array of ``count`` values."""
+    out = np.empty(count, dtype=dtype)
+    if count:
+        collection.foreach_get(prop, out)
+    return out
+
+
+def _attribute(mesh, name, domain, prop, count, dtype):
+    """A generic attribute's values, or None when the mesh has no such attribute.
+
+    NOTE: generic attributes (3.5+) are read by ``foreach_get`` as one memory copy; the
+    older per-element RNA paths (``loops["vertex_index"]``, ``uv_layers[..].data["uv"]``)
+    copy element by element and cost ~100x more in 4.x/5.x (docs/benchmarks.md)."""
+    attributes = getattr(mesh, "attributes", None)
+    attribute = attributes.get(name) if attributes is not None else None
+    if attribute is None or attribute.domain != domain:
+        return None
+    return read_array(attribute.data, prop, count, dtype)
+
+
+def vertex_positions(mesh):
+    """(V, 3) float32 vertex coordinates."""
+    count = len(mesh.vertices) * 3
+    coords = _attribute(mesh, "position", 'POINT', "vector", count, np.float32)
+    if coords is None:                           # 3.4
+        coords = read_array(mesh.vertices, "co", count, np.float32)
+    return coords.reshape(-1, 3)
+
+
+def corner_vertex_indices(mesh):
+    """(L,) int32 vertex index of each corner (loop)."""
+    count = len(mesh.loops)
+    indices = _attribute(mesh, ".corner_vert", 'CORNER', "value", count, np.int32)
+    if indices is None:                          # 3.4 .. 3.5
+        indices = read_array(mesh.loops, "vertex_index", count, np.int32)
+    return indices
+
+
+def corner_normals(mesh):
+    """(L, 3) float32 split normal of each corner."""
+    count = len(mesh.loops) * 3
+    if hasattr(mesh, "corner_normals"):          # 4.1+
+        normals = read_array(mesh.corner_normals, "vector", count, np.float32)
+    else:                                        # 3.4 .. 4.0
+        mesh.calc_normals_split()
+        normals = read_array(mesh.loops, "normal", count, np.float32)
+    return normals.reshape(-1, 3)
+
+
+def corner_uvs(mesh):
+    """(L, 2) float32 active UV map per corner, or None without one."""
+    uv_layer = mesh.uv_layers.active
+    count = len(mesh.loops)
+    if uv_layer is None or not count:
+        return None
+    uvs = _attribute(mesh, uv_layer.name, 'CORNER', "vector", count * 2, np.float32)
+    if uvs is None:                              # 3.4: UV maps are not attributes yet
+        uvs = read_array(uv_layer.data, "uv", count * 2, np.float32)
+    return uvs.reshape(-1, 2)
+
+
+def triangle_material_indices(mesh, tri_count):
+    """Material slot of each loop triangle. Meshes with one material have no
+    ``material_index`` attribute in 3.5+, which makes the common case free."""
+    face_count = len(mesh.polygons)
+    per_face = _attribute(mesh, "material_index", 'FACE', "value", face_count, np.int32)
+    if per_face is not None:
+        if hasattr(mesh, "loop_triangle_polygons"):      # 3.6+: fast per-triangle face
+            face = read_array(mesh.loop_triangle_polygons, "value", tri_count, np.int32)
+        else:
+            face = read_array(mesh.loop_triangles, "polygon_index", tri_count, np.int32)
+        return per_face[face]
+    if getattr(mesh, "attributes", None) is not None and \
+            hasattr(mesh, "loop_triangle_polygons"):
+        return np.zeros(tri_count, dtype=np.int32)
+    return read_array(mesh.loop_triangles, "material_index", tri_count, np.int32)
+
+
+# -- render results -----------------------------------------------------------------------
+def write_pass(render_pass, pixels):
+    """Copy an (H, W, C) float32 array into a RenderResult pass."""
+    flat = np.ascontiguousarray(pixels, dtype=np.float32).reshape(-1, render_pass.channels)
+    try:
+        render_pass.rect.foreach_set(flat.ravel())
+    except (TypeError, RuntimeError, ValueError):
+        # 3.4 wants W*H rows of channels rather than one flat array.
+        render_pass.rect.foreach_set(flat)
+
+
+# -- importers ----------------------------------------------------------------------------
+def gltf_importer_needs_numpy_bool():
+    """The 3.4/3.5 glTF importer uses ``np.bool``, which numpy 1.24 removed (Debian 12 ships
+    Blender 3.4 with numpy 1.24)."""
+    return bpy.app.version < (3, 6, 0) and "bool" not in vars(np)
+
+
+# -- process exit -------------------------------------------------------------------------
+def exit_process(code):
+    """Leave the process with ``code``. NOTE: pip bpy 4.2 segfaults while Python shuts down
+    after any render by an engine with ``bl_use_gpu_context`` (a six-line engine does it
+    too), which would turn every exit code into 139; skipping the shutdown keeps the code.
+    5.0 exits cleanly, so it gets the normal path (and its exit handlers)."""
+    if bpy.app.version < (5, 0, 0):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    sys.exit(code)

@@ -1,0 +1,245 @@
+"""The ``CSM`` RenderEngine: thin adapters from Blender's engine API to the pipeline.
+
+Owns nothing but the glue: ``render()`` (F12, ``blender -b -f``, the CLI) and
+``view_update()``/``view_draw()`` (the 3D viewport in Rendered mode) gather a snapshot, keep
+the mesh cache in sync, call ``Pipeline`` and hand the pixels to Blender. GPU objects live
+on the engine instance, created lazily in the context that draws them, and are dropped when
+Blender frees the instance.
+
+``render_final(scene)`` is the one way code asks for a final render and gets its
+``RenderResult`` back (images, plan, timings, warnings, error): Blender creates the engine
+itself, so the request travels to ``render()`` for the duration of that one call.
+"""
+
+import contextlib
+import time
+
+import bpy
+
+from ..render import gpu_mesh, pipeline, shaders
+from ..render.result import RenderResult
+from . import compat, mesh_cache, snapshot
+
+# Render targets and shadow atlas kept from one final render to the next (each render gets
+# a new engine instance and GPU context; textures, unlike framebuffers, may be shared).
+_FINAL_RENDER_TEXTURES = {}
+
+
+class _Request:
+    """What the caller of ``render_final`` asked for, and what ``render()`` produced."""
+
+    def __init__(self, keep_images=False, profile=False):
+        self.keep_images = keep_images
+        self.profile = profile
+        self.result = None
+
+
+# The request of the ``render_final`` call in progress (None: a render the user started).
+_ACTIVE_REQUEST = [None]
+
+
+@contextlib.contextmanager
+def _requested(request):
+    previous = _ACTIVE_REQUEST[0]
+    _ACTIVE_REQUEST[0] = request
+    try:
+        yield request
+    finally:
+        _ACTIVE_REQUEST[0] = previous
+
+
+def render_final(scene, write_still=False, keep_images=False, profile=False):
+    """Render ``scene`` with its own engine setting, as F12 does, and return the
+    ``RenderResult`` (for another engine, one with only the wall time). ``keep_images``
+    also returns the passes as numpy arrays (and world positions, which tests ray-cast
+    from); ``profile`` waits for the GPU after each pass so its time is its own."""
+    request = _Request(keep_images=keep_images, profile=profile)
+    start = time.perf_counter()
+    with _requested(request):
+        if scene != bpy.context.scene:
+            raise ValueError(f"render_final renders the context's scene, not '{scene.name}'")
+        bpy.ops.render.render(write_still=write_still)
+    result = request.result
+    if result is None:
+        result = RenderResult()
+        if scene.render.engine == CSMRenderEngine.bl_idname:
+            result.error = "the render stopped before producing an image"
+    result.timings["wall"] = time.perf_counter() - start
+    return result
+
+
+def _wants_normal_pass(depsgraph):
+    layer = depsgraph.view_layer
+    return bool(getattr(layer, "use_pass_normal", False))
+
+
+class CSMRenderEngine(bpy.types.RenderEngine):
+    bl_idname = "CSM"
+    bl_label = "CSM"
+    bl_use_preview = False
+    bl_use_gpu_context = True
+    bl_use_shading_nodes_custom = False
+    # Material Preview stays EEVEE's; only Rendered shading runs CSM.
+    bl_use_eevee_viewport = True
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.pipeline = None
+        self.cache = None
+
+    def __del__(self):
+        # Drop GPU objects while the engine's context is still known to Blender.
+        try:
+            self.pipeline = None
+            self.cache = None
+        except (AttributeError, ReferenceError):
+            pass
+
+    # -- final render ----------------------------------------------------------------------
+    def update_render_passes(self, scene=None, renderlayer=None):
+        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", 'COLOR')
+        if renderlayer.use_pass_z:
+            self.register_pass(scene, renderlayer, "Depth", 1, "Z", 'VALUE')
+        if renderlayer.use_pass_normal:
+            self.register_pass(scene, renderlayer, "Normal", 3, "XYZ", 'VECTOR')
+        self.register_pass(scene, renderlayer, "Shadow", 1, "X", 'VALUE')
+        self.register_pass(scene, renderlayer, "Cascade", 1, "X", 'VALUE')
+
+    def render(self, depsgraph):
+        request = _ACTIVE_REQUEST[0] or _Request()
+        request.result = self._render(depsgraph, request)
+        if request.result.error:
+            self.report({'ERROR'}, "CSM: " + request.result.error)
+        for warning in request.result.warnings:
+            self.report({'WARNING'}, "CSM: " + warning)
+
+    def _render(self, depsgraph, request):
+        scene = depsgraph.scene
+        scale = scene.render.resolution_percentage / 100.0
+        width = max(int(scene.render.resolution_x * scale), 1)
+        height = max(int(scene.render.resolution_y * scale), 1)
+        camera = snapshot.camera_from_scene(scene, depsgraph, width, height)
+        if camera is None:
+            return RenderResult(error="the scene has no camera: add one or set Scene > Camera")
+        self.update_stats("CSM", "Reading scene")
+        start = time.perf_counter()
+        snap = snapshot.take(depsgraph, camera)
+        scene_read = time.perf_counter() - start
+        uploaded_before = gpu_mesh.UPLOADS["bytes"]
+        cache = mesh_cache.MeshCache()
+        cache.sync(snap.mesh_sources)
+        snap.mesh_sources = {}
+        mesh_upload = time.perf_counter() - start - scene_read
+        self.update_progress(0.3)
+        self.update_stats("CSM", f"Drawing {sum(m.triangle_count for m in cache.meshes.values())}"
+                                 " triangles")
+        renderer = pipeline.Pipeline(textures=_FINAL_RENDER_TEXTURES)
+        renderer.profile = request.profile
+        try:
+            result = renderer.render_offscreen(
+                snap, cache, with_positions=request.keep_images,
+                with_normals=request.keep_images or _wants_normal_pass(depsgraph))
+        except shaders.ShaderCompileError as error:
+            return RenderResult(error=str(error))
+        result.timings.update(scene_read=scene_read, mesh_upload=mesh_upload)
+        result.upload_bytes = gpu_mesh.UPLOADS["bytes"] - uploaded_before
+        self.update_progress(0.9)
+
+        render_result = self.begin_result(0, 0, width, height)
+        for name in ("Shadow", "Cascade"):
+            if render_result.layers[0].passes.find_by_name(name, "") is None:
+                try:
+                    self.add_pass(name, 1, "X")
+                except Exception:
+                    pass
+        passes = render_result.layers[0].passes
+        images = result.images
+        aux = images["aux"]
+        compat.write_pass(passes["Combined"], images["combined"])
+        pass_pixels = {"Depth": aux[..., 2:3], "Shadow": aux[..., 0:1],
+                       "Cascade": aux[..., 1:2]}
+        if "normal" in images:       # read back only when the Normal pass is on
+            pass_pixels["Normal"] = images["normal"][..., :3]
+        for name, pixels in pass_pixels.items():
+            render_pass = passes.find_by_name(name, "")
+            if render_pass is not None:
+                compat.write_pass(render_pass, pixels)
+        self.end_result(render_result)
+        if not request.keep_images:
+            result.images = None
+        self.update_progress(1.0)
+        return result
+
+    # -- viewport ------------------------------------------------------------------------
+    def view_update(self, context, depsgraph):
+        if self.cache is None:
+            self.cache = mesh_cache.MeshCache()
+        apply_depsgraph_updates(self.cache, depsgraph.updates)
+
+    def view_draw(self, context, depsgraph):
+        import gpu
+        if self.cache is None:
+            self.cache = mesh_cache.MeshCache()
+        if self.pipeline is None:
+            self.pipeline = pipeline.Pipeline()
+        region = context.region
+        camera = snapshot.camera_from_region(context.region_data, region.width, region.height)
+        snap = snapshot.take(depsgraph, camera, is_viewport=True)
+        self.cache.sync(snap.mesh_sources)
+        snap.mesh_sources = {}
+        gpu.state.blend_set('ALPHA_PREMULT' if snap.film_transparent else 'NONE')
+        try:
+            self.pipeline.draw(snap, self.cache, None, region.width, region.height)
+        except shaders.ShaderCompileError as error:
+            # First compile failed: nothing good to fall back to. Say so once per draw.
+            print(f"CSM: {error}")
+        finally:
+            gpu.state.blend_set('NONE')
+            gpu.state.depth_test_set('NONE')
+            gpu.state.depth_mask_set(False)
+
+
+def apply_depsgraph_updates(cache, updates):
+    """Turn depsgraph updates into cache invalidations (geometry only; moves upload nothing)."""
+    dirty = set()
+    materials = False
+    for update in updates:
+        datablock = update.id
+        if isinstance(datablock, bpy.types.Object):
+            if update.is_updated_geometry:
+                original = datablock.original if datablock.original else datablock
+                dirty.add(original.name)
+        elif isinstance(datablock, (bpy.types.Material, bpy.types.NodeTree)):
+            materials = True
+        elif isinstance(datablock, bpy.types.Image):
+            cache.textures.pop(datablock.name, None)
+    if dirty or materials:
+        cache.invalidate(dirty, materials=materials)
+
+
+def _compatible_panels():
+    """Blender's own panels that apply to any engine (dimensions, output, colour management,
+    camera, light, world): those that list BLENDER_RENDER, plus EEVEE's light panels."""
+    wanted_eevee = {"DATA_PT_EEVEE_light", "DATA_PT_EEVEE_light_distance", "DATA_PT_spot",
+                    "DATA_PT_EEVEE_shadow", "EEVEE_WORLD_PT_surface", "DATA_PT_light",
+                    "RENDER_PT_eevee_film", "EEVEE_MATERIAL_PT_surface",
+                    "EEVEE_MATERIAL_PT_context_material"}
+    excluded = {"VIEWLAYER_PT_filter", "VIEWLAYER_PT_layer_passes"}
+    for panel in bpy.types.Panel.__subclasses__():
+        engines = getattr(panel, "COMPAT_ENGINES", None)
+        if engines is None or panel.__name__ in excluded or "lightprobe" in panel.__name__:
+            continue
+        if "BLENDER_RENDER" in engines or panel.__name__ in wanted_eevee:
+            yield panel
+
+
+def register():
+    bpy.utils.register_class(CSMRenderEngine)
+    for panel in _compatible_panels():
+        panel.COMPAT_ENGINES.add("CSM")
+
+
+def unregister():
+    for panel in _compatible_panels():
+        panel.COMPAT_ENGINES.discard("CSM")
+    bpy.utils.unregister_class(CSMRenderEngine)

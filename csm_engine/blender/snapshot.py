@@ -1,0 +1,142 @@
+"""Per-frame snapshot: everything the pipeline needs, read out of Blender once per frame.
+
+Owns the translation from Blender's conventions to the engine's plain data: camera matrices
+(from the scene camera for final renders, from the region for the viewport), lights (sun,
+point, spot, with colour x energy), the World colour used as ambient, the CSM settings, and
+the list of mesh instances with their world matrices. After ``take()`` returns, nothing
+downstream reads ``bpy`` properties (the evaluated objects in ``mesh_sources`` are only
+handed to the mesh cache for extraction).
+"""
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..core.camera import CameraView, clip_range_from_projection
+from ..core.frame import FrameSnapshot, MeshInstance, PointLight, SpotLight, Sun
+
+# Blender point/spot power is in watts; CSM's Blinn-Phong treats power / 100 W as the light's
+# intensity multiplier, so an imported course light (colour c, 100 W) shines with exactly c.
+POINT_WATTS_PER_UNIT = 100.0
+# Radius used for Blender lights that have no Custom Distance set.
+DEFAULT_LIGHT_RADIUS = 20.0
+
+
+def _matrix(m):
+    return np.array(m, dtype=np.float64).reshape(4, 4)
+
+
+def camera_from_scene(scene, depsgraph, width, height):
+    """The scene camera as the final render sees it (lens, sensor, shift, ortho, clipping)."""
+    camera = scene.camera
+    if camera is None:
+        return None
+    camera_eval = camera.evaluated_get(depsgraph)
+    render = scene.render
+    clip_from_view = _matrix(camera_eval.calc_matrix_camera(
+        depsgraph, x=width, y=height,
+        scale_x=render.pixel_aspect_x, scale_y=render.pixel_aspect_y))
+    world_from_view = _matrix(camera_eval.matrix_world.normalized())
+    data = camera_eval.data
+    is_perspective = getattr(data, "type", 'PERSP') != 'ORTHO'
+    if hasattr(data, "clip_start"):
+        clip_start, clip_end = data.clip_start, data.clip_end
+    else:
+        clip_start, clip_end = clip_range_from_projection(clip_from_view, is_perspective)
+    return CameraView(world_from_view, clip_from_view, is_perspective,
+                      float(clip_start), float(clip_end), width, height)
+
+
+def camera_from_region(region_data, width, height):
+    """The 3D viewport's view, whether looking through a camera or free."""
+    clip_from_view = _matrix(region_data.window_matrix)
+    view_from_world = _matrix(region_data.view_matrix)
+    is_perspective = bool(region_data.is_perspective)
+    clip_start, clip_end = clip_range_from_projection(clip_from_view, is_perspective)
+    return CameraView(np.linalg.inv(view_from_world), clip_from_view, is_perspective,
+                      float(clip_start), float(clip_end), width, height)
+
+
+def settings_snapshot(scene):
+    csm = scene.csm
+    values = {}
+    for prop in csm.bl_rna.properties:
+        name = prop.identifier
+        if name in ("rna_type", "name"):
+            continue
+        value = getattr(csm, name)
+        values[name] = tuple(value) if hasattr(value, "__len__") and \
+            not isinstance(value, str) else value
+    return SimpleNamespace(**values)
+
+
+def _world_color(world):
+    if world is None:
+        return np.zeros(3)
+    if world.use_nodes and world.node_tree:
+        for node in world.node_tree.nodes:
+            if node.type == 'BACKGROUND':
+                color = node.inputs[0]
+                strength = node.inputs[1].default_value
+                if not color.is_linked:
+                    return np.array(color.default_value[:3]) * strength
+    return np.array(world.color[:3], dtype=np.float64)
+
+
+def _light_radius(light):
+    if getattr(light, "use_custom_distance", False):
+        return float(light.cutoff_distance)
+    if "csm_radius" in light:
+        return float(light["csm_radius"])
+    return DEFAULT_LIGHT_RADIUS
+
+
+def take(depsgraph, camera, is_viewport=False):
+    """Read one frame's worth of plain data out of the evaluated depsgraph."""
+    scene = depsgraph.scene_eval if hasattr(depsgraph, "scene_eval") else depsgraph.scene
+    snap = FrameSnapshot(camera=camera, settings=settings_snapshot(scene),
+                         film_transparent=bool(scene.render.film_transparent),
+                         scene_name=scene.name)
+    world_color = _world_color(scene.world)
+    snap.ambient = world_color * snap.settings.ambient_strength
+    snap.background = world_color
+
+    for instance in depsgraph.object_instances:
+        obj = instance.object
+        if is_viewport and hasattr(instance, "show_self") and not instance.show_self:
+            continue
+        if obj.type == 'LIGHT':
+            _add_light(snap, obj, _matrix(instance.matrix_world))
+        elif obj.type in {'MESH', 'CURVE', 'SURFACE', 'FONT', 'META'}:
+            key = obj.original.name if obj.original else obj.name
+            snap.instances.append(MeshInstance(key, _matrix(instance.matrix_world)))
+            snap.mesh_sources.setdefault(key, obj)
+    return snap
+
+
+def _add_light(snap, obj, world_from_light):
+    light = obj.data
+    color = np.array(light.color[:3], dtype=np.float64)
+    axis_z = world_from_light[:3, 2] / max(np.linalg.norm(world_from_light[:3, 2]), 1e-12)
+    position = world_from_light[:3, 3].copy()
+    casts_shadow = bool(getattr(light, "use_shadow", True))
+    if light.type == 'SUN':
+        if snap.sun is None:   # the first sun casts the cascades; CSM has one sun
+            snap.sun = Sun(to_light=axis_z, color=color * light.energy,
+                           casts_shadow=casts_shadow, name=obj.name)
+    elif light.type == 'POINT':
+        snap.points.append(PointLight(position, color * light.energy / POINT_WATTS_PER_UNIT,
+                                      _light_radius(light)))
+    elif light.type == 'SPOT':
+        rotation = world_from_light.copy()
+        for c in range(3):
+            rotation[:3, c] /= max(np.linalg.norm(rotation[:3, c]), 1e-12)
+        snap.spots.append(SpotLight(
+            position=position, direction=-axis_z,
+            color=color * light.energy / POINT_WATTS_PER_UNIT,
+            radius=_light_radius(light), spot_size=float(light.spot_size),
+            spot_blend=float(light.spot_blend), casts_shadow=casts_shadow,
+            world_from_light=rotation,
+            clip_start=float(getattr(light, "shadow_buffer_clip_start", 0.05) or 0.05)))
+    # AREA lights are not supported by CSM (neither by the course); they are ignored.
+

@@ -1,0 +1,164 @@
+"""Panels: the CSM settings in Properties > Render and in the 3D View sidebar ("CSM" tab).
+
+Owns layout only. Both places draw the same groups through ``draw_*`` functions, so a
+setting appears identically wherever the user looks for it. "Light" edits the sun
+(``Scene.csm_light``, see light_controls.py) and the ambient term; "Scene" holds the
+import/reload/shader-reload/screenshot/first-person commands and the last shader error.
+"""
+
+import bpy
+
+
+def draw_cascades(layout, csm):
+    col = layout.column()
+    col.prop(csm, "cascade_count")
+    col.prop(csm, "split_scheme")
+    if csm.split_scheme == 'HYBRID':
+        col.prop(csm, "split_lambda")
+    if csm.split_scheme == 'MANUAL':
+        row = col.row(align=True)
+        for i in range(max(csm.cascade_count - 1, 0)):
+            row.prop(csm, "manual_splits", index=i, text=f"Split {i + 1}")
+    col.prop(csm, "shadow_distance")
+    col.prop(csm, "resolution")
+    col.prop(csm, "equal_resolution")
+    col.prop(csm, "stabilize")
+    row = col.row(align=True)
+    row.prop(csm, "fade_out")
+    sub = row.row()
+    sub.active = csm.fade_out
+    sub.prop(csm, "fade_fraction", text="")
+
+
+def draw_filtering(layout, csm):
+    col = layout.column()
+    col.prop(csm, "pcf_radius")
+    col.prop(csm, "pcf_pattern")
+    col.prop(csm, "blend_band")
+
+
+def draw_bias(layout, csm):
+    col = layout.column()
+    col.prop(csm, "depth_bias")
+    col.prop(csm, "slope_bias")
+    col.prop(csm, "normal_offset")
+    col.prop(csm, "cull_front_faces")
+
+
+def draw_occluders(layout, csm):
+    col = layout.column()
+    col.prop(csm, "occluder_margin_auto")
+    sub = col.column()
+    sub.active = not csm.occluder_margin_auto
+    sub.prop(csm, "occluder_margin")
+
+
+def draw_debug(layout, csm):
+    col = layout.column()
+    col.prop(csm, "debug_view")
+    col.prop(csm, "debug_shadow_map")
+    col.prop(csm, "debug_inset")
+    col.prop(csm, "freeze_cascades")
+
+
+def draw_light(layout, context):
+    from . import light_controls
+    col = layout.column()
+    sun = light_controls.sun_object(context.scene)
+    if sun is None:
+        col.label(text="No Sun light in this scene", icon='INFO')
+    else:
+        light = context.scene.csm_light
+        col.label(text=f"Sun: {sun.name}", icon='LIGHT_SUN')
+        col.prop(light, "sun_azimuth")
+        col.prop(light, "sun_elevation")
+        col.prop(light, "sun_direction", text="Direction")
+        col.operator("csm.reset_sun_direction", icon='FILE_REFRESH')
+    col.separator()
+    col.prop(context.scene.csm, "ambient_strength")
+    col.prop(context.scene.render, "film_transparent")
+
+
+def _wrapped(text, width=48):
+    lines, line = [], ""
+    for word in text.split():
+        if line and len(line) + 1 + len(word) > width:
+            lines.append(line)
+            line = word
+        else:
+            line = f"{line} {word}" if line else word
+    return lines + ([line] if line else [])
+
+
+def draw_scene(layout, context):
+    col = layout.column(align=True)
+    col.operator("csm.import_scene", text="Import Scene...", icon='IMPORT')
+    col.operator("csm.reload_scene", text="Reload Scene (Ctrl R)", icon='FILE_REFRESH')
+    col.operator("csm.reload_shaders", text="Reload Shaders (F5)", icon='SHADERFX')
+    col.operator("csm.screenshot", text="Screenshot...", icon='RENDER_STILL')
+    col.operator("csm.first_person", text="First Person (Shift F)", icon='VIEW_CAMERA')
+    layout.prop(context.scene.csm_light, "fly_speed_factor")
+    layout.prop(context.scene.csm_light, "fly_turn_speed")
+    error = shader_error()
+    if error:
+        box = layout.box()
+        box.label(text="Shader error (previous shaders in use):", icon='ERROR')
+        for line in _wrapped(error):
+            box.label(text=line)
+
+
+def shader_error():
+    """The last shader reload error, without importing gpu when shaders never loaded."""
+    import sys
+    shaders = sys.modules.get(__package__.rpartition(".")[0] + ".render.shaders")
+    return getattr(getattr(shaders, "LIBRARY", None), "last_error", None)
+
+
+GROUPS = (
+    ("cascades", "Cascades", lambda layout, context: draw_cascades(layout, context.scene.csm)),
+    ("filtering", "Filtering", lambda layout, context: draw_filtering(layout, context.scene.csm)),
+    ("bias", "Bias", lambda layout, context: draw_bias(layout, context.scene.csm)),
+    ("occluders", "Occluders", lambda layout, context: draw_occluders(layout, context.scene.csm)),
+    ("light", "Light", draw_light),
+    ("debug", "Debug", lambda layout, context: draw_debug(layout, context.scene.csm)),
+    ("scene", "Scene", draw_scene),
+)
+
+
+def _make_panel(space, region, context_name, key, label, draw_fn, category=None):
+    def draw(self, context):
+        # Must return None: Blender 3.4 reports any other return value on every redraw.
+        self.layout.use_property_split = True
+        draw_fn(self.layout, context)
+
+    attrs = {
+        "bl_idname": f"CSM_PT_{space.lower()}_{key}",
+        "bl_label": label,
+        "bl_space_type": space,
+        "bl_region_type": region,
+        "COMPAT_ENGINES": {"CSM"},
+        "poll": classmethod(lambda cls, context: context.engine == "CSM"),
+        "draw": draw,
+    }
+    if context_name:
+        attrs["bl_context"] = context_name
+    if category:
+        attrs["bl_category"] = category
+    return type(attrs["bl_idname"], (bpy.types.Panel,), attrs)
+
+
+classes = tuple(
+    [_make_panel('PROPERTIES', 'WINDOW', "render", key, label, fn)
+     for key, label, fn in GROUPS] +
+    [_make_panel('VIEW_3D', 'UI', None, key, label, fn, category="CSM")
+     for key, label, fn in GROUPS])
+
+
+def register():
+    for cls in classes:
+        bpy.utils.register_class(cls)
+
+
+def unregister():
+    for cls in reversed(classes):
+        bpy.utils.unregister_class(cls)

@@ -1,0 +1,71 @@
+"""One frame's plain data: camera, lights, settings, mesh instances.
+
+Owns the ``FrameSnapshot`` that ``blender/snapshot.py`` fills once per frame and every later
+stage reads; nothing here knows about Blender. numpy only.
+"""
+
+import math
+from dataclasses import dataclass, field
+from types import SimpleNamespace
+
+import numpy as np
+
+from .camera import CameraView
+
+
+@dataclass
+class Sun:
+    to_light: np.ndarray        # unit vector pointing towards the sun
+    color: np.ndarray           # colour x strength
+    casts_shadow: bool
+    name: str = ""
+
+
+@dataclass
+class PointLight:
+    position: np.ndarray
+    color: np.ndarray
+    radius: float
+
+
+@dataclass
+class SpotLight:
+    position: np.ndarray
+    direction: np.ndarray       # unit vector the light shines along
+    color: np.ndarray
+    radius: float
+    spot_size: float            # full cone angle, radians
+    spot_blend: float
+    casts_shadow: bool
+    world_from_light: np.ndarray
+    clip_start: float
+
+
+@dataclass
+class MeshInstance:
+    key: str                    # mesh-cache key (the original object's name)
+    world_from_object: np.ndarray
+
+
+@dataclass
+class FrameSnapshot:
+    camera: CameraView
+    settings: SimpleNamespace
+    sun: Sun = None
+    points: list = field(default_factory=list)
+    spots: list = field(default_factory=list)
+    instances: list = field(default_factory=list)
+    mesh_sources: dict = field(default_factory=dict)   # key -> evaluated object
+    ambient: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    background: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    film_transparent: bool = False
+    scene_name: str = ""
+
+
+
+def spot_cone_cosines(spot):
+    """cos of the outer and inner cone half-angles, Blender's spot_blend softening."""
+    half = 0.5 * spot.spot_size
+    cos_outer = math.cos(half)
+    cos_inner = math.cos(half * (1.0 - min(max(spot.spot_blend, 0.0), 1.0)))
+    return cos_outer, max(cos_inner, cos_outer + 1e-4)

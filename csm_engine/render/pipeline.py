@@ -1,0 +1,356 @@
+"""The deferred pipeline: shadow atlas, G-buffer, lighting and debug views, for any target.
+
+Owns every GPU pass and the textures they render into. Input is a ``FrameSnapshot``
+(plain data) plus a ``MeshCache``; output is pixels in a target framebuffer: the viewport's
+own (``view_draw``) or an offscreen one that ``render()`` reads back. Both go through
+``Pipeline.draw``, so the viewport and a final render of the same camera agree.
+
+Passes per frame:
+1. shadow: one depth-only tile per cascade (and per shadowed spot light) in one atlas;
+2. G-buffer: albedo+specular, normal+shininess, view depth (0 = background), depth; world
+   positions are rebuilt from view depth in the lighting pass (``world_positions`` here);
+3. lighting: a full-screen pass reading the G-buffer and the atlas (``lighting_frag.glsl``);
+4. overlays: frozen cascade boxes.
+
+Framebuffers belong to the GPU context that made them, so a ``Pipeline`` is owned by one
+engine instance (one viewport, or one final render) and is never shared.
+"""
+
+import time
+
+import numpy as np
+
+from ..core import cascades
+from ..core.shadow_plan import (CASCADE_LINE_COLORS, front_to_back, instance_bounds,
+                                layout_atlas, pack_frame, plan_shadows, world_positions)
+from . import shaders
+from .result import RenderResult
+
+
+
+def _column_major(matrix):
+    return np.asarray(matrix, dtype=np.float32).T.ravel().tolist()
+
+
+def _column_major_stack(matrices):
+    """(N, 4, 4) matrices -> N lists of 16 floats in GLSL's column-major order."""
+    matrices = np.asarray(matrices, dtype=np.float32)
+    return matrices.transpose(0, 2, 1).reshape(len(matrices), 16).tolist()
+
+
+class Pipeline:
+    """GPU resources and passes for one engine instance (one GPU context)."""
+
+    def __init__(self, textures=None):
+        # Textures may be shared between GPU contexts (framebuffers may not), so final
+        # renders pass one long-lived dict and skip reallocating ~80 MB of targets per frame.
+        self._textures = {} if textures is None else textures
+        self._framebuffers = {}
+        self._fullscreen = None
+        self._white = None
+        self.warnings = []
+        self.timings = {}
+        self.profile = False
+        self.skip_gpu_calls = False   # benchmark only: a frame of Python without the GPU
+        self.gbuffer_fb = None      # kept after draw() for the final render's read-back
+
+    # -- resources ---------------------------------------------------------------------
+    def _texture(self, name, size, fmt):
+        import gpu
+        key = (name, size, fmt)
+        texture = self._textures.get(name)
+        if texture is None or texture[0] != key:
+            self._framebuffers = {k: v for k, v in self._framebuffers.items()
+                                  if name not in k}
+            self._textures[name] = (key, gpu.types.GPUTexture(size, format=fmt))
+        return self._textures[name][1]
+
+    def _framebuffer(self, name, depth=None, colors=()):
+        import gpu
+        key = (name, id(depth), tuple(id(c) for c in colors))
+        fb = self._framebuffers.get(key)
+        if fb is None:
+            fb = gpu.types.GPUFrameBuffer(depth_slot=depth, color_slots=colors)
+            self._framebuffers = {k: v for k, v in self._framebuffers.items() if k[0] != name}
+            self._framebuffers[key] = fb
+        return fb
+
+    def _fullscreen_batch(self):
+        import gpu
+        if self._fullscreen is None:
+            fmt = gpu.types.GPUVertFormat()
+            fmt.attr_add(id="pos", comp_type='F32', len=2, fetch_mode='FLOAT')
+            vbo = gpu.types.GPUVertBuf(fmt, 3)
+            vbo.attr_fill("pos", np.array([[-1, -1], [3, -1], [-1, 3]], dtype=np.float32))
+            self._fullscreen = gpu.types.GPUBatch(type='TRIS', buf=vbo)
+        return self._fullscreen
+
+    def _frame_ubo(self, frame_data):
+        import gpu
+        if getattr(self, "_ubo", None) is None:
+            self._ubo = gpu.types.GPUUniformBuf(frame_data.tobytes())
+        else:
+            self._ubo.update(frame_data.tobytes())
+        return self._ubo
+
+    def _white_texture(self):
+        import gpu
+        if self._white is None:
+            self._white = gpu.types.GPUTexture(
+                (1, 1), format='RGBA8',
+                data=gpu.types.Buffer('FLOAT', 4, [1.0, 1.0, 1.0, 1.0]))
+        return self._white
+
+    def _atlas(self, plan):
+        """The shadow atlas; on allocation failure, halve resolutions and say so."""
+        while True:
+            size = layout_atlas(plan.tiles)
+            try:
+                return self._texture("atlas", size, 'DEPTH_COMPONENT32F')
+            except Exception as error:
+                if all(t.resolution <= 64 for t in plan.tiles):
+                    raise
+                message = (f"shadow atlas {size[0]}x{size[1]} could not be allocated "
+                           f"({error}); halving shadow resolutions")
+                if message not in self.warnings:
+                    self.warnings.append(message)
+                for tile in plan.tiles:
+                    tile.texel_world *= 2.0 if tile.resolution > 64 else 1.0
+                    tile.resolution = max(tile.resolution // 2, 64)
+
+    def _sync(self, fb, name, start):
+        """When profiling, wait for the GPU (a 1-pixel read) and record the pass time."""
+        if self.profile:
+            with fb.bind():
+                fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
+            self.timings[name] = time.perf_counter() - start
+        return time.perf_counter()
+
+    # -- passes ------------------------------------------------------------------------
+    def draw(self, snap, cache, target_fb=None, width=None, height=None):
+        """Render one frame into ``target_fb`` (None: the currently bound framebuffer)."""
+        import gpu
+        library = shaders.LIBRARY
+        width = width or snap.camera.width
+        height = height or snap.camera.height
+        start = time.perf_counter()
+        self.timings = {}
+
+        # World AABB per instance: caster culling per cascade, and the scene's bounds for the
+        # automatic occluder margin.
+        bounds_lo_hi = instance_bounds(snap.instances, cache.meshes)
+        bounds = None if bounds_lo_hi is None else \
+            (bounds_lo_hi[0].min(axis=0), bounds_lo_hi[1].max(axis=0))
+        plan = plan_shadows(snap, bounds)
+        self.warnings.extend(w for w in plan.warnings if w not in self.warnings)
+        atlas = self._atlas(plan)
+        frame_data = pack_frame(snap, plan)
+        frame_ubo = self._frame_ubo(frame_data)
+        self.timings["python_setup"] = time.perf_counter() - start
+
+        # Once per frame: each instance's batches, opaque and alpha-masked apart, with
+        # their material inputs, and its matrix; the passes below only index into these.
+        white = self._white_texture()
+        items = self._draw_items(snap, cache, white)
+        world_from_objects = np.array([i.world_from_object for i in snap.instances],
+                                      dtype=np.float64).reshape(-1, 4, 4)
+        world_from_objects_gl = _column_major_stack(world_from_objects)
+
+        # 1. Shadow atlas
+        t = time.perf_counter()
+        atlas_fb = self._framebuffer("atlas", depth=atlas)
+        with atlas_fb.bind():
+            self._gpu_call(atlas_fb.clear, depth=1.0)
+            gpu.state.depth_test_set('LESS_EQUAL')
+            gpu.state.depth_mask_set(True)
+            gpu.state.face_culling_set('FRONT' if snap.settings.cull_front_faces else 'NONE')
+            for tile in plan.tiles:
+                gpu.state.viewport_set(tile.origin[0], tile.origin[1],
+                                       tile.resolution, tile.resolution)
+                visible = self._cull(snap.instances, bounds_lo_hi, tile)
+                if len(visible) == 0:
+                    continue
+                clip_from_objects = _column_major_stack(
+                    tile.clip_from_world @ world_from_objects[visible])
+                for masked in (False, True):
+                    shadow = library.get("shadow_masked" if masked else "shadow")
+                    shadow.bind()
+                    for row, index in enumerate(visible):
+                        draws = items[index][masked]
+                        if not draws:
+                            continue
+                        shadow.uniform_float("clip_from_object", clip_from_objects[row])
+                        for batch, texture, color, params in draws:
+                            if masked:   # the opaque program has no material inputs
+                                shadow.uniform_float("material_params",
+                                                     (0.0, color[3], params[2], params[3]))
+                                shadow.uniform_sampler("base_color_texture", texture)
+                            self._gpu_call(batch.draw, shadow)
+            gpu.state.face_culling_set('NONE')
+        t = self._sync(atlas_fb, "shadow", t)
+
+        # 2. G-buffer
+        albedo = self._texture("albedo", (width, height), 'RGBA16F')
+        normal = self._texture("normal", (width, height), 'RGBA16F')
+        view_depth = self._texture("view_depth", (width, height), 'R32F')
+        depth = self._texture("depth", (width, height), 'DEPTH_COMPONENT32F')
+        gbuffer_fb = self._framebuffer("gbuffer", depth=depth,
+                                       colors=(albedo, normal, view_depth))
+        # Near to far, so the early depth test skips the shading of hidden fragments.
+        order = front_to_back(snap, bounds_lo_hi)
+        with gbuffer_fb.bind():
+            gpu.state.viewport_set(0, 0, width, height)
+            self._gpu_call(gbuffer_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+            gpu.state.depth_test_set('LESS_EQUAL')
+            gpu.state.depth_mask_set(True)
+            for masked in (False, True):
+                gbuffer = library.get("gbuffer_masked" if masked else "gbuffer")
+                gbuffer.bind()
+                gbuffer.uniform_block("frame", frame_ubo)
+                for index in order:
+                    draws = items[index][masked]
+                    if not draws:
+                        continue
+                    gbuffer.uniform_float("world_from_object", world_from_objects_gl[index])
+                    for batch, texture, color, params in draws:
+                        gbuffer.uniform_float("base_color", color)
+                        gbuffer.uniform_float("material_params", params)
+                        gbuffer.uniform_sampler("base_color_texture", texture)
+                        self._gpu_call(batch.draw, gbuffer)
+            gpu.state.depth_test_set('NONE')
+        t = self._sync(gbuffer_fb, "gbuffer", t)
+
+        # 3. Lighting (+ debug views) into the target
+        lighting = library.get("lighting")
+
+        def light_pass():
+            gpu.state.viewport_set(0, 0, width, height)
+            gpu.state.depth_test_set('NONE')
+            gpu.state.depth_mask_set(False)
+            lighting.bind()
+            lighting.uniform_block("frame", frame_ubo)
+            lighting.uniform_sampler("gbuffer_albedo", albedo)
+            lighting.uniform_sampler("gbuffer_normal", normal)
+            lighting.uniform_sampler("gbuffer_depth", view_depth)
+            lighting.uniform_sampler("shadow_atlas", atlas)
+            self._gpu_call(self._fullscreen_batch().draw, lighting)
+            if plan.frozen_camera is not None:
+                self._draw_frozen(snap, plan)
+
+        if target_fb is None:
+            light_pass()
+        else:
+            with target_fb.bind():
+                light_pass()
+            t = self._sync(target_fb, "lighting", t)
+        self.gbuffer_fb = gbuffer_fb
+        self.timings["total"] = time.perf_counter() - start
+        return plan
+
+    def _gpu_call(self, call, *args, **kwargs):
+        """Every draw and clear of a frame goes through here, so that the benchmark can
+        time the frame's Python alone (``skip_gpu_calls``): on llvmpipe a draw call does
+        the vertex work on the calling thread and its rasteriser threads compete with
+        Python for the cores, so a normal frame cannot tell Python and GPU time apart."""
+        if not self.skip_gpu_calls:
+            call(*args, **kwargs)
+
+    def _cull(self, instances, bounds_lo_hi, tile):
+        if bounds_lo_hi is None:
+            return range(0)
+        if tile.cascade is None:    # spot tiles: no caster culling (few, small frusta)
+            return range(len(instances))
+        mask = cascades.aabbs_in_cascade(bounds_lo_hi[0], bounds_lo_hi[1], tile.cascade)
+        return np.nonzero(mask)[0]
+
+    def _draw_items(self, snap, cache, white):
+        """Per instance: (opaque draws, alpha-masked draws), each a list of (batch, texture,
+        base colour, material parameters); instances of one mesh share the lists."""
+        per_mesh = {}
+        items = []
+        for instance in snap.instances:
+            entry = per_mesh.get(instance.key)
+            if entry is None:
+                mesh = cache.meshes.get(instance.key)
+                entry = ([], [])
+                for batch, slot in (mesh.batches if mesh is not None else ()):
+                    texture, color, params = self._material(cache, mesh, slot, white)
+                    entry[params[2] > 0.0].append((batch, texture, color, params))
+                per_mesh[instance.key] = entry
+            items.append(entry)
+        return items
+
+    def _material(self, cache, mesh, slot, white):
+        """Texture, base colour and packed parameters (shininess, specular, alpha cutoff,
+        has texture) of one material slot; both the shadow and G-buffer passes use them."""
+        material = mesh.materials[slot] if slot < len(mesh.materials) else None
+        if material is None:
+            return white, (0.8, 0.8, 0.8, 1.0), (32.0, 0.5, 0.0, 0.0)
+        texture = cache.texture(material.image) if material.image is not None else None
+        return (texture or white, tuple(material.base_color),
+                (material.shininess, material.specular, material.alpha_cutoff,
+                 1.0 if texture else 0.0))
+
+    def _draw_frozen(self, snap, plan):
+        """Draw each frozen cascade's light-space box as coloured lines."""
+        import gpu
+        lines, colors = [], []
+        for index, tile in enumerate(plan.tiles[:plan.cascade_count]):
+            world_from_clip = np.linalg.inv(tile.clip_from_world)
+            corners = np.array([[x, y, z, 1.0] for z in (-1, 1) for y in (-1, 1)
+                                for x in (-1, 1)]) @ world_from_clip.T
+            corners = corners[:, :3] / corners[:, 3:]
+            for a, b in ((0, 1), (2, 3), (4, 5), (6, 7), (0, 2), (1, 3), (4, 6), (5, 7),
+                         (0, 4), (1, 5), (2, 6), (3, 7)):
+                lines += [corners[a], corners[b]]
+                colors += [CASCADE_LINE_COLORS[index]] * 2
+        if not lines:
+            return
+        fmt = gpu.types.GPUVertFormat()
+        fmt.attr_add(id="pos", comp_type='F32', len=3, fetch_mode='FLOAT')
+        fmt.attr_add(id="color", comp_type='F32', len=4, fetch_mode='FLOAT')
+        vbo = gpu.types.GPUVertBuf(fmt, len(lines))
+        vbo.attr_fill("pos", np.array(lines, dtype=np.float32))
+        vbo.attr_fill("color", np.array(colors, dtype=np.float32))
+        batch = gpu.types.GPUBatch(type='LINES', buf=vbo)
+        shader = shaders.LIBRARY.get("lines")
+        shader.bind()
+        shader.uniform_float("clip_from_world", _column_major(snap.camera.clip_from_world))
+        batch.draw(shader)
+
+    # -- read-back for final renders -----------------------------------------------------
+    def render_offscreen(self, snap, cache, with_positions=False, with_normals=True):
+        """Draw into offscreen float targets and read back (combined, aux, normal, and the
+        G-buffer's world positions when asked: tests ray-cast from them)."""
+        import gpu
+        width, height = snap.camera.width, snap.camera.height
+        color = self._texture("final_color", (width, height), 'RGBA32F')
+        aux = self._texture("final_aux", (width, height), 'RGBA32F')
+        target = self._framebuffer("final", colors=(color, aux))
+        with target.bind():
+            target.clear(color=(0.0, 0.0, 0.0, 0.0))
+        plan = self.draw(snap, cache, target, width, height)
+        t = time.perf_counter()
+        out = {}
+        count = width * height * 4
+        reads = [("combined", target, 0), ("aux", target, 1)]
+        if with_normals or with_positions:
+            reads.append(("normal", self.gbuffer_fb, 1))
+        for name, fb, slot in reads:
+            buffer = gpu.types.Buffer('FLOAT', count)
+            with fb.bind():
+                fb.read_color(0, 0, width, height, 4, slot, 'FLOAT', data=buffer)
+            out[name] = np.frombuffer(buffer, dtype=np.float32).reshape(height, width, 4).copy()
+        if with_positions:
+            # xyz = world position, w = coverage (1 on geometry), as tests ray-cast from it.
+            aux = out["aux"]
+            covered = aux[..., 3] > 0.5
+            position = np.zeros_like(aux)
+            position[..., :3] = world_positions(
+                snap.camera, np.where(covered, aux[..., 2], 1.0).astype(np.float64))
+            position[..., :3] *= covered[..., None]
+            position[..., 3] = covered
+            out["position"] = position
+        self.timings["readback"] = time.perf_counter() - t
+        return RenderResult(images=out, plan=plan, timings=dict(self.timings),
+                            warnings=list(self.warnings))

@@ -1,0 +1,272 @@
+"""GLSL programs: loading from ``shaders/``, includes, uniform-block layouts, hot reload.
+
+Owns every ``gpu.types.GPUShader`` the pipeline uses. GLSL lives as real files in
+``shaders/``; ``#include "file.glsl"`` is resolved here (create-info has no include
+mechanism), and each included file gets its own ``#line N id`` so compiler messages can be
+mapped back to ``file.glsl:line``.
+
+Uniform blocks are described once, in Python (``UniformLayout``), which generates both the
+std140 GLSL struct and the numpy packing, so the two can never disagree.
+
+``ShaderLibrary.reload()`` compiles everything anew and swaps only if every program
+compiled: on an error the last good shaders keep running and ``last_error`` says why.
+"""
+
+import os
+import re
+import sys
+import tempfile
+
+from ..core import paths
+from ..core.frame_layout import FRAME_LAYOUT, MAX_CASCADES, MAX_POINT_LIGHTS, MAX_SPOT_LIGHTS
+
+# --------------------------------------------------------------------------------------
+# Program descriptions
+# --------------------------------------------------------------------------------------
+
+# Each program: vertex inputs, interface (name, type, interpolation), push constants,
+# samplers, whether it reads the frame uniform block, fragment outputs.
+PROGRAMS = {
+    "gbuffer": dict(
+        vertex="gbuffer_vert.glsl", fragment="gbuffer_frag.glsl",
+        inputs=(("pos", "VEC3"), ("nor", "VEC3"), ("uv", "VEC2")),
+        interface=(("world_normal", "VEC3", "smooth"), ("tex_coord", "VEC2", "smooth"),
+                   ("view_depth", "FLOAT", "smooth")),
+        push=(("MAT4", "world_from_object"), ("VEC4", "base_color"),
+              ("VEC4", "material_params")),   # shininess, specular, alpha cutoff, has texture
+        samplers=(("FLOAT_2D", "base_color_texture"),),
+        frame=True,
+        outputs=(("VEC4", "out_albedo"), ("VEC4", "out_normal"), ("FLOAT", "out_depth")),
+    ),
+    "shadow": dict(
+        vertex="shadow_vert.glsl", fragment="shadow_frag.glsl",
+        inputs=(("pos", "VEC3"), ("uv", "VEC2")),
+        interface=(("tex_coord", "VEC2", "smooth"),),
+        push=(("MAT4", "clip_from_object"), ("VEC4", "material_params")),
+        samplers=(("FLOAT_2D", "base_color_texture"),),
+        frame=False,
+        outputs=(("VEC4", "out_unused"),),
+    ),
+    "lighting": dict(
+        vertex="fullscreen_vert.glsl", fragment="lighting_frag.glsl",
+        inputs=(("pos", "VEC2"),),
+        interface=(("screen_uv", "VEC2", "smooth"),),
+        push=(),
+        samplers=(("FLOAT_2D", "gbuffer_albedo"), ("FLOAT_2D", "gbuffer_normal"),
+                  ("FLOAT_2D", "gbuffer_depth"), ("FLOAT_2D", "shadow_atlas")),
+        frame=True,
+        outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
+    ),
+    "lines": dict(
+        vertex="lines_vert.glsl", fragment="lines_frag.glsl",
+        inputs=(("pos", "VEC3"), ("color", "VEC4")),
+        interface=(("line_color", "VEC4", "smooth"),),
+        push=(("MAT4", "clip_from_world"),),
+        samplers=(),
+        frame=False,
+        outputs=(("VEC4", "out_color"),),
+    ),
+}
+
+# NOTE: a fragment shader that may ``discard`` turns off the rasterizer's early depth test,
+# so every hidden fragment runs the whole shader (llvmpipe: about half the G-buffer cost).
+# Opaque materials therefore draw with programs that cannot discard; alpha-masked
+# (cut-out) materials use these variants, compiled from the same files with ALPHA_MASK.
+for _name in ("gbuffer", "shadow"):
+    PROGRAMS[_name + "_masked"] = dict(PROGRAMS[_name], defines=(("ALPHA_MASK", "1"),))
+
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
+
+
+class ShaderCompileError(Exception):
+    """A GLSL program failed to compile; the message names file and line where known."""
+
+
+# NOTE: Blender 4.2+ rewrites the program text and drops the file number of ``#line N id``
+# from compiler messages, so each file instead gets its own block of line numbers: line n of
+# file k is reported as k * LINES_PER_FILE + n, whatever the driver or Blender prints.
+LINES_PER_FILE = 10000
+
+
+def _expand_includes(name, directory, file_ids, depth=0):
+    """Return ``name``'s source with includes inlined and ``#line`` markers for mapping."""
+    if depth > 8:
+        raise ShaderCompileError(f"{name}: #include nested too deeply (a cycle?)")
+    path = os.path.join(directory, name)
+    try:
+        with open(path, encoding="utf-8") as handle:
+            text = handle.read()
+    except OSError as error:
+        raise ShaderCompileError(f"{path}: cannot read shader ({error.strerror})") from None
+    file_id = file_ids.setdefault(name, len(file_ids) + 1)
+    base = file_id * LINES_PER_FILE
+    out = [f"#line {base + 1}"]
+    for number, line in enumerate(text.splitlines(), start=1):
+        match = _INCLUDE.match(line)
+        if match:
+            out.append(_expand_includes(match.group(1), directory, file_ids, depth + 1))
+            out.append(f"#line {base + number + 1}")
+        else:
+            out.append(line)
+    return "\n".join(out) + "\n"
+
+
+def _map_log(log, file_ids):
+    """Rewrite line numbers in a compiler log to ``file.glsl:line`` (see LINES_PER_FILE)."""
+    names = {i: n for n, i in file_ids.items()}
+
+    def replace(match):
+        number = int(match.group(0))
+        name = names.get(number // LINES_PER_FILE)
+        return f"{name}:{number % LINES_PER_FILE}" if name else match.group(0)
+
+    return re.sub(r"(?<![\d.])\d{5,6}(?![\d.])", replace, log)
+
+
+_LOCATION = re.compile(r"[\w.-]+\.glsl:\d+")
+
+
+def _error_lines(log):
+    """The compiler's error lines, each with a file:line where the log has one. A location
+    printed on a line just above the message (``10171 | <source>`` then ``| Error: ...``)
+    is joined to it. Blender 3.4/4.2 print none at all (see shader_diagnostics)."""
+    lines = log.splitlines()
+    errors = []
+    for index, line in enumerate(lines):
+        if "error" not in line.lower() or "EGL" in line or "pyGPU_Shader" in line:
+            continue
+        text = line.strip(" |")
+        if not _LOCATION.search(text):
+            for previous in reversed(lines[max(index - 3, 0):index]):
+                found = _LOCATION.search(previous)
+                if found:
+                    text = f"{found.group(0)}: {text}"
+                    break
+        errors.append(text)
+    return errors
+
+
+class _CapturedOutput:
+    """Capture what the GL driver and Blender print to stdout/stderr at the fd level."""
+
+    def __enter__(self):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        self._file = tempfile.TemporaryFile(mode="w+b")
+        self._saved = (os.dup(1), os.dup(2))
+        os.dup2(self._file.fileno(), 1)
+        os.dup2(self._file.fileno(), 2)
+        return self
+
+    def __exit__(self, *exc):
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os.dup2(self._saved[0], 1)
+        os.dup2(self._saved[1], 2)
+        os.close(self._saved[0])
+        os.close(self._saved[1])
+        self._file.seek(0)
+        self.text = self._file.read().decode("utf-8", "replace")
+        self._file.close()
+        return False
+
+
+def _build(program_name, spec, directory):
+    import gpu
+
+    file_ids = {}
+    vertex = _expand_includes(spec["vertex"], directory, file_ids)
+    fragment = _expand_includes(spec["fragment"], directory, file_ids)
+
+    info = gpu.types.GPUShaderCreateInfo()
+    interface = gpu.types.GPUStageInterfaceInfo(f"csm_{program_name}_iface")
+    for name, kind, interpolation in spec["interface"]:
+        getattr(interface, interpolation)(kind, name)
+    for slot, (name, kind) in enumerate(spec["inputs"]):
+        info.vertex_in(slot, kind, name)
+    info.vertex_out(interface)
+    for kind, name in spec["push"]:
+        info.push_constant(kind, name)
+    for slot, (kind, name) in enumerate(spec["samplers"]):
+        info.sampler(slot, kind, name)
+    if spec["frame"]:
+        info.typedef_source(FRAME_LAYOUT.glsl())
+        info.uniform_buf(0, FRAME_LAYOUT.type_name, "frame")
+    for slot, (kind, name) in enumerate(spec["outputs"]):
+        info.fragment_out(slot, kind, name)
+    info.define("MAX_CASCADES", str(MAX_CASCADES))
+    info.define("MAX_POINT_LIGHTS", str(MAX_POINT_LIGHTS))
+    info.define("MAX_SPOT_LIGHTS", str(MAX_SPOT_LIGHTS))
+    for name, value in spec.get("defines", ()):
+        info.define(name, value)
+    info.vertex_source(vertex)
+    info.fragment_source(fragment)
+
+    with _CapturedOutput() as captured:
+        try:
+            shader = gpu.shader.create_from_info(info)
+            failed = None
+        except Exception as error:  # Blender raises a bare Exception on compile errors
+            shader, failed = None, error
+    if failed is not None:
+        log = _map_log(captured.text, file_ids)
+        errors = _error_lines(log)
+        if not any(_LOCATION.search(error) for error in errors):
+            # Blender 3.4/4.2 drop the location (see shader_diagnostics): ask the driver.
+            from . import shader_diagnostics
+            defines = [("MAX_CASCADES", MAX_CASCADES), ("MAX_POINT_LIGHTS", MAX_POINT_LIGHTS),
+                       ("MAX_SPOT_LIGHTS", MAX_SPOT_LIGHTS), *spec.get("defines", ())]
+            driver = shader_diagnostics.driver_log(
+                spec, {"vertex": vertex, "fragment": fragment}, defines,
+                FRAME_LAYOUT.glsl() if spec["frame"] else "",
+                (FRAME_LAYOUT.type_name, "frame") if spec["frame"] else None)
+            located = [e for e in _error_lines(_map_log(driver, file_ids)) if _LOCATION.search(e)]
+            errors = located or errors
+        detail = "; ".join(errors[:5]) or str(failed)
+        if not _LOCATION.search(detail):
+            # No location from Blender nor the driver: name the files at least.
+            detail = f"in {', '.join(file_ids)}: {detail}"
+        raise ShaderCompileError(f"shader '{program_name}' failed to compile: {detail}")
+    # Pass through anything else the driver said (warnings), as Blender would have.
+    noise = [line for line in captured.text.splitlines() if line and "EGL" not in line]
+    if noise:
+        print("\n".join(noise))
+    return shader
+
+
+class ShaderLibrary:
+    """All programs, compiled lazily together; reload keeps the last good set on error."""
+
+    def __init__(self, directory=None):
+        self.directory = directory
+        self._shaders = None
+        self.last_error = None
+        self.generation = 0
+
+    def _compile_all(self):
+        directory = self.directory or paths.shaders_dir()
+        return {name: _build(name, spec, directory) for name, spec in PROGRAMS.items()}
+
+    def get(self, name):
+        if self._shaders is None:
+            self._shaders = self._compile_all()
+            self.generation += 1
+        return self._shaders[name]
+
+    def reload(self):
+        """Recompile every program from disk. Returns None on success, else the message."""
+        try:
+            shaders = self._compile_all()
+        except ShaderCompileError as error:
+            self.last_error = str(error)
+            print(f"CSM: {self.last_error} (keeping the previous shaders)", file=sys.stderr)
+            return self.last_error
+        self._shaders = shaders
+        self.last_error = None
+        self.generation += 1
+        return None
+
+
+# Shaders may be shared between GPU contexts (unlike framebuffers), so one library serves
+# the viewport and final renders alike.
+LIBRARY = ShaderLibrary()

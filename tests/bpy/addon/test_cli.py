@@ -1,0 +1,105 @@
+"""The course's command-line contract: scene in, PNG out, one-line errors.
+
+Runs ``python -m csm_engine`` in a subprocess of this interpreter (pip bpy 5.0), and the
+``blender -b -P csm_engine/blender_cli.py`` bridge on Debian's Blender 3.4.
+"""
+import os
+import shutil
+import subprocess
+import sys
+
+import bpy
+import numpy as np
+import pytest
+
+from tests.bpy.bpy_helpers import REPO
+
+DEFAULT_SCENE = os.path.join(REPO, "csm_engine", "data", "scenes", "default.json")
+
+
+def run_cli(args, cwd):
+    env = dict(os.environ, PYTHONPATH=REPO)
+    return subprocess.run([sys.executable, "-m", "csm_engine", *args], cwd=cwd, env=env,
+                          capture_output=True, text=True, timeout=300)
+
+
+def load_png(path):
+    image = bpy.data.images.load(path, check_existing=False)
+    try:
+        width, height = image.size
+        pixels = np.empty(width * height * 4, dtype=np.float32)
+        image.pixels.foreach_get(pixels)
+    finally:
+        bpy.data.images.remove(image)
+    return pixels.reshape(height, width, 4)[::-1]
+
+
+def assert_lit_landscape(pixels):
+    rgb = pixels[..., :3]
+    luminance = rgb @ np.array([0.2126, 0.7152, 0.0722])
+    bright = np.percentile(luminance, 90)
+    assert bright > 0.3, "a good part of the image is sunlit"
+    assert (luminance < 0.5 * bright).mean() > 0.05, "and some of it is in shadow"
+    green = (rgb[..., 1] > rgb[..., 0]) & (rgb[..., 1] > rgb[..., 2])
+    assert green.mean() > 0.2, "the landscape's grass shows its texture colour"
+
+
+def test_default_scene_to_png_at_the_requested_size(tmp_path):
+    result = run_cli(["--resolution", "320x180"], cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    shot = tmp_path / "csm_default.png"
+    pixels = load_png(str(shot))
+    assert pixels.shape == (180, 320, 4)
+    assert_lit_landscape(pixels)
+
+
+def test_scene_and_screenshot_arguments_and_overrides(tmp_path):
+    shot = tmp_path / "cascades.png"
+    result = run_cli([DEFAULT_SCENE, str(shot), "--resolution", "160x90",
+                      "--set", "debug_view=CASCADES", "--set", "pcf_radius=2"], cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    rgb = load_png(str(shot))[..., :3]
+    # The landscape is green and brown; only the far cascade's tint makes pixels blue.
+    blue = (rgb[..., 2] > rgb[..., 0] + 0.05) & (rgb[..., 2] > rgb[..., 1] + 0.05)
+    assert blue.mean() > 0.2, "cascade colours tint the image"
+
+
+@pytest.mark.parametrize("args, code, words", [
+    (["missing.json"], 3, ["missing.json"]),
+    (["bad.json"], 3, ["bad.json", "line"]),
+    ([DEFAULT_SCENE, "out.png", "--set", "pcf_radius=99"], 2, ["pcf_radius", "99"]),
+    ([DEFAULT_SCENE, "out.png", "--set", "nonsense=1"], 2, ["nonsense"]),
+    ([DEFAULT_SCENE, "out.png", "--set", "split_scheme=SPIRAL"], 2, ["split_scheme", "SPIRAL"]),
+    ([DEFAULT_SCENE, "out.png", "--resolution", "big"], 2, ["--resolution", "big"]),
+    ([DEFAULT_SCENE, "no/such/folder/out.png"], 2, ["no/such/folder"]),
+])
+def test_user_mistakes_give_one_line_and_a_nonzero_exit(tmp_path, args, code, words):
+    (tmp_path / "bad.json").write_text('{"objects": [ }')
+    result = run_cli(args, cwd=tmp_path)
+    assert result.returncode == code, (result.returncode, result.stderr)
+    errors = [line for line in result.stderr.splitlines() if line.startswith("csm: error:")]
+    assert len(errors) == 1, result.stderr
+    assert "Traceback" not in result.stderr
+    for word in words:
+        assert word in errors[0], (word, errors[0])
+    assert not (tmp_path / "out.png").exists()
+
+
+def test_blender_binary_bridge_on_blender_34(tmp_path):
+    blender = os.environ.get("CSM_BLENDER") or shutil.which("blender")
+    assert blender, "Debian's blender (3.4) is required: apt-get install blender"
+    shot = tmp_path / "shot.png"
+    result = subprocess.run(
+        [blender, "-b", "--factory-startup", "-P",
+         os.path.join(REPO, "csm_engine", "blender_cli.py"), "--",
+         DEFAULT_SCENE, str(shot), "--resolution", "320x180"],
+        capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    pixels = load_png(str(shot))
+    assert pixels.shape == (180, 320, 4)
+    assert_lit_landscape(pixels)
+    bad = subprocess.run(
+        [blender, "-b", "--factory-startup", "-P",
+         os.path.join(REPO, "csm_engine", "blender_cli.py"), "--", "nope.json"],
+        capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert bad.returncode == 3 and "nope.json" in bad.stderr

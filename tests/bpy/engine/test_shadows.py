@@ -1,0 +1,324 @@
+"""What a user sees of the sun's cascaded shadows (and the spot light's), checked in pixels.
+
+Scenes are built here with plain Blender calls so each test shows its whole set-up. The
+reference for "where should the shadow be" is an independent CPU ray cast (mathutils
+BVHTree) from the very surface points the G-buffer saw.
+"""
+import bpy
+import numpy as np
+import pytest
+from mathutils import Vector
+from mathutils.bvhtree import BVHTree
+
+from tests.bpy.bpy_helpers import render_result, render_scene
+
+COURSE_SUN = Vector((0.3, 0.7, -0.6))   # the course's (0.3, -0.6, -0.7), Y-up -> Z-up
+
+
+def add_box(location, scale, size=2.0):
+    bpy.ops.mesh.primitive_cube_add(size=size, location=location)
+    obj = bpy.context.object
+    obj.scale = scale
+    return obj
+
+
+def add_ground(size, location=(0, 0, 0)):
+    bpy.ops.mesh.primitive_plane_add(size=size, location=location)
+    return bpy.context.object
+
+
+def add_sun(direction):
+    bpy.ops.object.light_add(type='SUN')
+    sun = bpy.context.object
+    sun.rotation_euler = (-Vector(direction)).to_track_quat('Z', 'Y').to_euler()
+    return sun
+
+
+def add_camera(scene, location, target, lens=35.0, clip_end=300.0):
+    bpy.ops.object.camera_add(location=location)
+    camera = bpy.context.object
+    camera.rotation_euler = (Vector(target) - Vector(location)).to_track_quat('-Z', 'Y').to_euler()
+    camera.data.lens = lens
+    camera.data.clip_end = clip_end
+    scene.camera = camera
+    return camera
+
+
+def world_bvh(scene):
+    """One BVH of every mesh triangle in world space."""
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    verts, polys = [], []
+    for obj in scene.objects:
+        if obj.type != 'MESH':
+            continue
+        mesh = obj.evaluated_get(depsgraph).to_mesh()
+        mesh.calc_loop_triangles()
+        base = len(verts)
+        matrix = obj.matrix_world
+        verts += [matrix @ v.co for v in mesh.vertices]
+        polys += [[base + i for i in tri.vertices] for tri in mesh.loop_triangles]
+        obj.evaluated_get(depsgraph).to_mesh_clear()
+    return BVHTree.FromPolygons(verts, polys)
+
+
+def sun_facing_points(images, to_light, step=2):
+    """(pixel rows, cols), world points and normals of covered pixels facing the sun."""
+    position = images["position"][::step, ::step]
+    normal = images["normal"][::step, ::step, :3]
+    covered = position[..., 3] > 0.5
+    facing = (normal @ np.asarray(to_light, dtype=np.float32)) > 0.1
+    rows, cols = np.nonzero(covered & facing)
+    return rows * step, cols * step, position[rows, cols, :3], normal[rows, cols]
+
+
+def ray_cast_shadowed(bvh, points, normals, to_light):
+    to_light = Vector(to_light).normalized()
+    shadowed = np.zeros(len(points), dtype=bool)
+    for i, (p, n) in enumerate(zip(points, normals)):
+        origin = Vector(p) + Vector(n) * 1e-3 + to_light * 1e-3
+        shadowed[i] = bvh.ray_cast(origin, to_light)[0] is not None
+    return shadowed
+
+
+@pytest.fixture
+def pillar_field(empty_scene):
+    """The course's shadow test: a ground plane and 39 boxes scaled (1,3,1) (Y-up), 5 apart."""
+    scene = empty_scene
+    add_ground(240, location=(95, 0, 0))
+    for i in range(39):
+        add_box((i * 5.0, 0, 3.0), (1, 1, 3))
+    sun = add_sun(COURSE_SUN)
+    add_camera(scene, (-20, 50, 32), (35, 0, 0), lens=30)
+    return scene, sun
+
+
+def test_pillar_shadows_fall_where_a_ray_cast_says(pillar_field):
+    scene, sun = pillar_field
+    images = render_scene(scene, 480, 320)
+    to_light = -COURSE_SUN.normalized()
+    rows, cols, points, normals = sun_facing_points(images, to_light)
+    expected = ray_cast_shadowed(world_bvh(scene), points, normals, to_light)
+    csm_shadowed = images["aux"][rows, cols, 0] < 0.5
+    assert len(points) > 10000
+    assert 0.02 < expected.mean() < 0.6, "the view must show both shadow and light"
+    mismatch = np.mean(csm_shadowed != expected)
+    assert mismatch < 0.01, f"{mismatch:.2%} of sun-facing pixels disagree with the ray cast"
+
+
+def test_sun_use_shadow_off_removes_every_shadow(pillar_field):
+    scene, sun = pillar_field
+    sun.data.use_shadow = False
+    images = render_scene(scene, 240, 160)
+    assert images["aux"][..., 0].min() == 1.0
+
+
+@pytest.fixture
+def long_ground(empty_scene):
+    scene = empty_scene
+    add_ground(600, location=(0, 250, 0))
+    add_sun((0.2, 0.4, -1.0))
+    add_camera(scene, (0, -5, 4), (0, 60, 0), lens=30, clip_end=300)
+    scene.csm.debug_view = 'CASCADES'
+    scene.csm.split_lambda = 0.75      # splits at ~43 and ~150 m: both well on screen
+    return scene
+
+
+def test_cascade_colours_in_depth_order(long_ground):
+    scene = long_ground
+    images = render_scene(scene, 320, 240)
+    cascade = images["aux"][..., 1]
+    covered = images["aux"][..., 3] > 0.5
+    column = [cascade[r, 160] for r in range(239, -1, -1) if covered[r, 160]]  # near -> far
+    steps = np.diff(column)
+    assert np.all(steps >= -1e-6), "cascade index must not decrease with view depth"
+    assert {0, 1, 2} <= set(np.round(column).astype(int)), "all 3 cascades on screen"
+    color = images["combined"][..., :3]
+    for index, channel in ((0, 0), (1, 1), (2, 2)):   # red, green, blue
+        pixels = color[np.isclose(cascade, index) & covered]
+        assert len(pixels) > 100
+        mean = pixels.mean(axis=0)
+        assert mean[channel] > 1.5 * np.delete(mean, channel).max(), (index, mean)
+
+
+def test_blend_band_removes_the_step_at_a_split(long_ground):
+    scene = long_ground
+    column = 160
+
+    def tint_steps(band):
+        scene.csm.blend_band = band
+        images = render_scene(scene, 320, 240)
+        cascade = images["aux"][:, column, 1]
+        covered = images["aux"][:, column, 3] > 0.5
+        tint = images["combined"][:, column, :3]
+        tint = tint / np.maximum(tint.max(axis=1, keepdims=True), 1e-6)
+        rows = np.nonzero(covered)[0]
+        jump = np.abs(np.diff(tint[rows], axis=0)).max()
+        fractional = np.mean(np.abs(cascade[rows] - np.round(cascade[rows])) > 0.01)
+        return jump, fractional
+
+    hard_jump, hard_fraction = tint_steps(0.0)
+    soft_jump, soft_fraction = tint_steps(25.0)
+    assert hard_fraction == 0.0 and hard_jump > 0.5, "without a band the switch is a step"
+    assert soft_fraction > 0.02, "inside the band both cascades are mixed"
+    assert soft_jump < 0.5 * hard_jump, (hard_jump, soft_jump)
+
+
+def test_larger_pcf_radius_widens_the_penumbra(pillar_field):
+    scene, _ = pillar_field
+    scene.csm.fade_out = False
+    scene.csm.blend_band = 0.0
+
+    def penumbra_pixels(radius):
+        scene.csm.pcf_radius = radius
+        visibility = render_scene(scene, 480, 320)["aux"][..., 0]
+        return int(np.sum((visibility > 0.02) & (visibility < 0.98)))
+
+    counts = [penumbra_pixels(r) for r in (0, 1, 3)]
+    assert counts[0] < 0.2 * counts[1], counts   # a single tap is a hard edge
+    assert counts[1] < counts[2], counts
+
+
+def test_stabilized_shadows_hold_still_while_the_camera_moves_less_than_a_texel(empty_scene):
+    scene = empty_scene
+    add_ground(200)
+    for x in range(-12, 13, 6):
+        add_box((x, x * 0.5, 2.0), (0.7, 0.7, 2.0))
+    add_sun((0.37, 0.52, -0.77))
+    camera = add_camera(scene, (0.0, 0.0, 40.0), (0.0, 0.0, 0.0))
+    camera.data.type = 'ORTHO'
+    camera.data.ortho_scale = 40.0
+    camera.data.clip_end = 100.0
+    width, height = 400, 400
+    pixel = camera.data.ortho_scale / width        # 0.1 scene units
+    scene.csm.resolution = 1024                    # texels of at least 0.12 units
+
+    def shadow_mask(x):
+        camera.location.x = x
+        result = render_result(scene, width, height)
+        return result.images["aux"][..., 0] < 0.5, result
+
+    def moved_pixels(stabilize):
+        scene.csm.stabilize = stabilize
+        before, result = shadow_mask(0.0)
+        after, _ = shadow_mask(pixel)              # the image moves by exactly one pixel
+        ground_cascade = int(result.images["aux"][height // 2, width // 2, 1])
+        texel = result.plan.tiles[ground_cascade].texel_world
+        assert pixel < texel, "the move must be smaller than a shadow texel"
+        changed = before[:, 1:] != after[:, :-1]
+        return changed.sum() / max(before.sum(), 1)
+
+    stable = moved_pixels(True)
+    unstable = moved_pixels(False)
+    assert stable < 0.001, f"{stable:.3%} of the shadow changed with stabilization on"
+    assert unstable > 0.01, "control: the tight fit swims, so the test can see movement"
+
+
+def test_off_screen_caster_still_casts_into_view(empty_scene):
+    scene = empty_scene
+    add_ground(300)
+    add_box((-40.0, 0.0, 15.0), (1.5, 1.5, 15.0))   # a tower well outside the view
+    add_sun((1.0, 0.0, -0.55))                      # low sun from -x: shadow points at +x
+    camera = add_camera(scene, (10.0, 0.0, 30.0), (10.0, 0.0, 0.0))
+    camera.data.type = 'ORTHO'
+    camera.data.ortho_scale = 20.0                  # sees x in 0..20 only
+    camera.data.clip_end = 60.0
+    scene.csm.fade_out = False
+
+    images = render_scene(scene, 200, 200)
+    shadowed = images["aux"][..., 0] < 0.5
+    assert 0.02 < shadowed.mean() < 0.5, "the tower's shadow reaches into the view"
+
+    scene.csm.occluder_margin_auto = False
+    scene.csm.occluder_margin = 0.0
+    images = render_scene(scene, 200, 200)
+    assert (images["aux"][..., 0] < 0.5).mean() < 0.001, \
+        "control: with no margin the off-screen tower is clipped and casts nothing"
+
+
+def test_spot_light_casts_a_shadow(empty_scene):
+    scene = empty_scene
+    add_ground(40)
+    add_box((0, 0, 1.0), (1, 1, 1))
+    bpy.ops.object.light_add(type='SPOT', location=(-6.0, 0.0, 6.0))
+    spot = bpy.context.object
+    spot.rotation_euler = (Vector((2.0, 0.0, 0.0)) - spot.location).to_track_quat(
+        '-Z', 'Y').to_euler()
+    spot.data.energy = 1000.0
+    spot.data.spot_size = np.radians(70.0)
+    spot.data.use_custom_distance = True
+    spot.data.cutoff_distance = 30.0
+    add_camera(scene, (4.0, -14.0, 14.0), (2.0, 0.0, 0.0))
+    from tests.bpy.engine.test_render import set_world_color
+    set_world_color(scene, (0.0, 0.0, 0.0))
+
+    images = render_scene(scene, 320, 240)
+    position = images["position"]
+    brightness = images["combined"][..., :3].sum(axis=2)
+    ground = (position[..., 3] > 0.5) & (np.abs(position[..., 2]) < 1e-3)
+    rows, cols = np.nonzero(ground)
+    points = position[rows, cols, :3]
+    light = np.array(spot.location)
+    to_light = light - points
+    distance = np.linalg.norm(to_light, axis=1)
+    axis = -np.array(spot.matrix_world.col[2][:3])
+    in_cone = (-(to_light / distance[:, None]) @ axis) > np.cos(np.radians(30.0))
+    bvh = world_bvh(scene)
+    blocked = np.array([bvh.ray_cast(Vector(p) + Vector((0, 0, 1e-3)), Vector(d))[2] is not None
+                        and bvh.ray_cast(Vector(p) + Vector((0, 0, 1e-3)), Vector(d))[2] <
+                        dist - 1e-2
+                        for p, d, dist in zip(points, to_light / distance[:, None], distance)])
+    lit = brightness[rows, cols][in_cone & ~blocked]
+    dark = brightness[rows, cols][in_cone & blocked]
+    assert len(dark) > 200 and len(lit) > 200
+    assert dark.mean() < 0.15 * lit.mean(), (dark.mean(), lit.mean())
+    assert np.mean(dark < 0.5 * np.median(lit)) > 0.9
+
+
+def test_an_impossible_shadow_resolution_falls_back_and_says_so(pillar_field):
+    scene, _ = pillar_field
+    scene.csm.cascade_count = 4
+    scene.csm.resolution = 8192
+    scene.csm.equal_resolution = True          # 4 x 8192^2: an atlas past GL's size limit
+    result = render_result(scene, 160, 120)
+    images = result.images
+    assert any("halving" in w for w in result.warnings), result.warnings
+    assert (images["aux"][..., 0] < 0.5).mean() > 0.005, "shadows still render"
+
+
+def test_frozen_cascades_keep_their_boxes_and_draw_them(pillar_field):
+    scene, _ = pillar_field
+    scene.csm.freeze_cascades = True
+    frozen = [t.clip_from_world.copy() for t in render_result(scene, 240, 160).plan.tiles]
+    scene.camera.location.x += 15.0
+    result = render_result(scene, 240, 160)
+    images = result.images
+    moved = [t.clip_from_world for t in result.plan.tiles]
+    assert all(np.array_equal(a, b) for a, b in zip(frozen, moved))
+    color = images["combined"][..., :3]
+    box_lines = (color[..., 0] > 0.9) & (color[..., 1] < 0.3) & (color[..., 2] < 0.3)
+    assert box_lines.sum() > 50, "the first cascade's box is drawn in red"
+    scene.csm.freeze_cascades = False
+    unfrozen = render_result(scene, 240, 160).plan
+    assert not np.array_equal(unfrozen.tiles[0].clip_from_world, frozen[0])
+
+
+def test_front_face_culling_keeps_closed_casters_shadowing(pillar_field):
+    scene, _ = pillar_field
+    scene.csm.cull_front_faces = True
+    images = render_scene(scene, 480, 320)
+    to_light = -COURSE_SUN.normalized()
+    rows, cols, points, normals = sun_facing_points(images, to_light)
+    expected = ray_cast_shadowed(world_bvh(scene), points, normals, to_light)
+    mismatch = np.mean((images["aux"][rows, cols, 0] < 0.5) != expected)
+    assert mismatch < 0.02, f"{mismatch:.2%} disagree with back faces as casters"
+
+
+def test_impossible_manual_splits_warn_and_fall_back(pillar_field):
+    scene, _ = pillar_field
+    scene.csm.split_scheme = 'MANUAL'
+    scene.csm.manual_splits = (0.5, 0.2, 0.6)      # the second split lies before the first
+    result = render_result(scene, 160, 120)
+    images = result.images
+    warnings = " ".join(result.warnings)
+    assert "manual split" in warnings and "hybrid" in warnings, warnings
+    assert (images["aux"][..., 0] < 0.5).mean() > 0.005, "shadows still render"
