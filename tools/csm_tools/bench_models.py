@@ -180,26 +180,23 @@ def _pick_member(names, wanted):
 
 
 def extract_monastery(archive, folder):
-    """Copy the monastery's .obj and .mtl out of a pybullet wheel (.whl) or sdist (.tar.gz)."""
+    """Copy the monastery's .obj and .mtl out of a pybullet wheel (.whl) or sdist (.tar.gz);
+    returns the names it could not find (empty on success)."""
     os.makedirs(folder, exist_ok=True)
     if archive.endswith((".whl", ".zip")):
-        with zipfile.ZipFile(archive) as opened:
-            names = opened.namelist()
-            members = {w: _pick_member(names, w) for w in MONASTERY_FILES}
-            if None in members.values():
-                return [w for w, m in members.items() if m is None]
-            for wanted, member in members.items():
-                with opened.open(member) as source:
-                    _write_atomic(os.path.join(folder, wanted), source)
+        opened = zipfile.ZipFile(archive)
+        names, open_member = opened.namelist(), opened.open
     else:
-        with tarfile.open(archive) as opened:
-            names = opened.getnames()
-            members = {w: _pick_member(names, w) for w in MONASTERY_FILES}
-            if None in members.values():
-                return [w for w, m in members.items() if m is None]
-            for wanted, member in members.items():
-                with opened.extractfile(member) as source:
-                    _write_atomic(os.path.join(folder, wanted), source)
+        opened = tarfile.open(archive)
+        names, open_member = opened.getnames(), opened.extractfile
+    with opened:
+        members = {w: _pick_member(names, w) for w in MONASTERY_FILES}
+        missing = [w for w, m in members.items() if m is None]
+        if missing:
+            return missing
+        for wanted, member in members.items():
+            with open_member(member) as source:
+                _write_atomic(os.path.join(folder, wanted), source)
     return []
 
 
