@@ -12,7 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
-from ..core.camera import CameraView, clip_range_from_projection
+from ..core.camera import CameraView
 from ..core.frame import FrameSnapshot, MeshInstance, PointLight, SpotLight, Sun
 
 # Blender point/spot power is in watts; CSM's Blinn-Phong treats power / 100 W as the light's
@@ -38,23 +38,17 @@ def camera_from_scene(scene, depsgraph, width, height):
         scale_x=render.pixel_aspect_x, scale_y=render.pixel_aspect_y))
     world_from_view = _matrix(camera_eval.matrix_world.normalized())
     data = camera_eval.data
-    is_perspective = getattr(data, "type", 'PERSP') != 'ORTHO'
-    if hasattr(data, "clip_start"):
-        clip_start, clip_end = data.clip_start, data.clip_end
-    else:
-        clip_start, clip_end = clip_range_from_projection(clip_from_view, is_perspective)
-    return CameraView(world_from_view, clip_from_view, is_perspective,
-                      float(clip_start), float(clip_end), width, height)
+    # The camera's own clip values are exact; the matrix holds them only to float32.
+    clip_start = getattr(data, "clip_start", None)
+    clip_end = getattr(data, "clip_end", None)
+    return CameraView(world_from_view, clip_from_view, width, height, clip_start, clip_end)
 
 
 def camera_from_region(region_data, width, height):
     """The 3D viewport's view, whether looking through a camera or free."""
     clip_from_view = _matrix(region_data.window_matrix)
     view_from_world = _matrix(region_data.view_matrix)
-    is_perspective = bool(region_data.is_perspective)
-    clip_start, clip_end = clip_range_from_projection(clip_from_view, is_perspective)
-    return CameraView(np.linalg.inv(view_from_world), clip_from_view, is_perspective,
-                      float(clip_start), float(clip_end), width, height)
+    return CameraView(np.linalg.inv(view_from_world), clip_from_view, width, height)
 
 
 def settings_snapshot(scene):

@@ -4,8 +4,8 @@ Owns every number the shadow passes need that can be computed on the CPU without
 
 - ``split_distances``: where the view depth is cut into cascades (uniform, logarithmic, the
   course's hybrid formula, or manual distances);
-- ``CameraProjection`` / ``frustum_slice_corners``: the camera's OpenGL projection (the same
-  matrix the G-buffer uses, Blender lens shift included) and the 8 corners of one depth slice;
+- ``frustum_slice_corners``: the 8 corners of one depth slice of the camera's projection
+  (``camera.CameraProjection``, the same matrix the G-buffer uses, lens shift included);
 - ``light_view_matrix`` / ``fit_cascade`` / ``compute_cascades``: the sun's orthographic box
   per cascade, stabilized (bounding sphere + texel snapping) or tight, with the occluder
   margin that pulls the near plane back toward the sun;
@@ -38,42 +38,17 @@ from itertools import combinations
 
 import numpy as np
 
+from .camera import CameraProjection, as_projection
+from .checks import finite, matrix4, vector3
+
 SPLIT_SCHEMES = ("UNIFORM", "LOG", "HYBRID", "MANUAL")
 MAX_CASCADES = 4
 MIN_CASCADE_RESOLUTION = 64          # texels; halving stops here (see cascade_resolutions)
 
 
 # --------------------------------------------------------------------------------------
-# Input checking helpers: every user mistake becomes one ValueError naming the value.
+# Input checking helpers (the shared ones are in checks.py)
 # --------------------------------------------------------------------------------------
-
-def _finite(name, value):
-    try:
-        value = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{name} must be a number, got {value!r}") from None
-    if not math.isfinite(value):
-        raise ValueError(f"{name} must be a finite number, got {value!r}")
-    return value
-
-
-def _vector3(name, value):
-    array = np.asarray(value, dtype=np.float64)
-    if array.shape != (3,):
-        raise ValueError(f"{name} must be 3 numbers, got shape {array.shape}: {value!r}")
-    if not np.all(np.isfinite(array)):
-        raise ValueError(f"{name} must be finite, got {array.tolist()}")
-    return array
-
-
-def _matrix4(name, value):
-    array = np.asarray(value, dtype=np.float64)
-    if array.shape != (4, 4):
-        raise ValueError(f"{name} must be a 4x4 matrix, got shape {array.shape}")
-    if not np.all(np.isfinite(array)):
-        raise ValueError(f"{name} must be finite, got {array.tolist()}")
-    return array
-
 
 def _count(count):
     try:
@@ -107,7 +82,7 @@ def _bounds(name, bounds):
     except (TypeError, ValueError):
         raise ValueError(f"{name} must be a pair (min, max) of 3-vectors, got {bounds!r}") \
             from None
-    low, high = _vector3(f"{name} min", low), _vector3(f"{name} max", high)
+    low, high = vector3(f"{name} min", low), vector3(f"{name} max", high)
     if np.any(low > high):
         raise ValueError(f"{name} min {low.tolist()} exceeds max {high.tolist()}")
     return low, high
@@ -154,7 +129,7 @@ def split_distances(near, far, count, scheme, lam=0.5, manual=None):
 
     Raises ``ValueError`` naming the bad value.
     """
-    near, far = _finite("near distance", near), _finite("far distance", far)
+    near, far = finite("near distance", near), finite("far distance", far)
     count = _count(count)
     if not isinstance(scheme, str) or scheme.upper() not in SPLIT_SCHEMES:
         raise ValueError(f"split scheme must be one of {', '.join(SPLIT_SCHEMES)}, "
@@ -162,7 +137,7 @@ def split_distances(near, far, count, scheme, lam=0.5, manual=None):
     scheme = scheme.upper()
     if not far > near:
         raise ValueError(f"far distance ({far}) must be greater than near distance ({near})")
-    lam = _finite("split lambda", lam)
+    lam = finite("split lambda", lam)
     if scheme == "HYBRID" and not 0.0 <= lam <= 1.0:
         raise ValueError(f"split lambda must be in 0..1, got {lam}")
     if scheme == "LOG":
@@ -221,7 +196,7 @@ def _manual_interior(near, far, count, manual):
 def manual_splits_from_fractions(far, fractions, count):
     """Interior split distances (scene units) from the settings' fractions of the shadow
     distance: ``distance_i = fraction_i * far`` for the first ``count - 1`` fractions."""
-    far = _finite("shadow distance", far)
+    far = finite("shadow distance", far)
     count = _count(count)
     values = np.atleast_1d(np.asarray(fractions, dtype=np.float64)).ravel()
     if values.shape[0] < count - 1:
@@ -246,128 +221,14 @@ def cascade_resolutions(count, base_resolution=2048, equal_resolution=False):
 # Camera projection and frustum slices
 # --------------------------------------------------------------------------------------
 
-@dataclass(frozen=True)
-class CameraProjection:
-    """A camera's projection, enough to build the same OpenGL matrix the G-buffer uses.
-
-    - ``kind``: ``'PERSP'`` or ``'ORTHO'``.
-    - ``fov_y``: full vertical field of view in radians (``'PERSP'``).
-    - ``ortho_height``: full height of the view in scene units (``'ORTHO'``).
-    - ``aspect``: width / height of the image (pixel aspect included).
-    - ``shift_x``, ``shift_y``: Blender lens shift, in units of the *larger* image
-      dimension (Blender's 'Auto' sensor fit): shift_x = 1 moves the view window by one
-      full width of a landscape image.
-    - ``clip_start``, ``clip_end``: view depths (scene units) of the near and far clip.
-    """
-
-    kind: str = "PERSP"
-    fov_y: float = math.radians(39.6)
-    ortho_height: float = 6.0
-    aspect: float = 16.0 / 9.0
-    shift_x: float = 0.0
-    shift_y: float = 0.0
-    clip_start: float = 0.1
-    clip_end: float = 100.0
-
-    def __post_init__(self):
-        if self.kind not in ("PERSP", "ORTHO"):
-            raise ValueError(f"camera projection kind must be 'PERSP' or 'ORTHO', "
-                             f"got {self.kind!r}")
-        for name in ("fov_y", "ortho_height", "aspect", "shift_x", "shift_y",
-                     "clip_start", "clip_end"):
-            _finite(f"camera {name}", getattr(self, name))
-        if self.kind == "PERSP" and not 0.0 < self.fov_y < math.pi:
-            raise ValueError(f"camera fov_y must be between 0 and pi radians, got {self.fov_y}")
-        if self.kind == "ORTHO" and not self.ortho_height > 0.0:
-            raise ValueError(f"camera ortho_height must be above 0, got {self.ortho_height}")
-        if not self.aspect > 0.0:
-            raise ValueError(f"camera aspect must be above 0, got {self.aspect}")
-        if self.kind == "PERSP" and not self.clip_start > 0.0:
-            raise ValueError(f"perspective camera clip_start must be above 0, "
-                             f"got {self.clip_start}")
-        if not self.clip_end > self.clip_start:
-            raise ValueError(f"camera clip_end ({self.clip_end}) must be greater than "
-                             f"clip_start ({self.clip_start})")
-
-    @property
-    def is_perspective(self):
-        return self.kind == "PERSP"
-
-    def view_window(self):
-        """(left, right, bottom, top) of the view window: at view depth 1 for a perspective
-        camera (tangents of the half angles), in scene units for an orthographic one."""
-        half_h = math.tan(0.5 * self.fov_y) if self.is_perspective else 0.5 * self.ortho_height
-        half_w = half_h * self.aspect
-        # Blender measures shift in the larger image dimension (full size = 2 * larger half).
-        larger = 2.0 * max(half_w, half_h)
-        centre_x, centre_y = self.shift_x * larger, self.shift_y * larger
-        return (centre_x - half_w, centre_x + half_w, centre_y - half_h, centre_y + half_h)
-
-    def clip_from_view(self):
-        """OpenGL projection (glFrustum / glOrtho), lens shift included, z mapped to -1..1."""
-        left, right, bottom, top = self.view_window()
-        near, far = self.clip_start, self.clip_end
-        m = np.zeros((4, 4))
-        m[0, 0] = 2.0 / (right - left)
-        m[1, 1] = 2.0 / (top - bottom)
-        if self.is_perspective:
-            # Window given at depth 1, so glFrustum's 2n/(r-l) becomes 2/(R-L).
-            m[0, 2] = (right + left) / (right - left)
-            m[1, 2] = (top + bottom) / (top - bottom)
-            m[2, 2] = -(far + near) / (far - near)
-            m[2, 3] = -2.0 * far * near / (far - near)
-            m[3, 2] = -1.0
-        else:
-            m[0, 3] = -(right + left) / (right - left)
-            m[1, 3] = -(top + bottom) / (top - bottom)
-            m[2, 2] = -2.0 / (far - near)
-            m[2, 3] = -(far + near) / (far - near)
-            m[3, 3] = 1.0
-        return m
-
-    @classmethod
-    def from_clip_from_view(cls, clip_from_view):
-        """Recover the projection from an OpenGL matrix (e.g. Blender's
-        ``calc_matrix_camera`` or a viewport's ``window_matrix``)."""
-        m = _matrix4("clip_from_view", clip_from_view)
-        if abs(m[3, 2] + 1.0) < 1e-9 and abs(m[3, 3]) < 1e-9:
-            kind = "PERSP"
-            width, height = 2.0 / m[0, 0], 2.0 / m[1, 1]
-            centre_x, centre_y = m[0, 2] * width * 0.5, m[1, 2] * height * 0.5
-            near, far = m[2, 3] / (m[2, 2] - 1.0), m[2, 3] / (m[2, 2] + 1.0)
-        elif np.allclose(m[3], (0.0, 0.0, 0.0, 1.0), atol=1e-9):
-            kind = "ORTHO"
-            width, height = 2.0 / m[0, 0], 2.0 / m[1, 1]
-            centre_x, centre_y = -m[0, 3] * width * 0.5, -m[1, 3] * height * 0.5
-            near, far = (m[2, 3] + 1.0) / m[2, 2], (m[2, 3] - 1.0) / m[2, 2]
-        else:
-            raise ValueError(f"clip_from_view is neither an OpenGL perspective nor an "
-                             f"orthographic projection (bottom row {m[3].tolist()})")
-        if not (width > 0.0 and height > 0.0):
-            raise ValueError(f"clip_from_view has a mirrored or empty view window "
-                             f"(width {width}, height {height})")
-        larger = max(width, height)
-        return cls(kind=kind,
-                   fov_y=2.0 * math.atan(0.5 * height) if kind == "PERSP" else cls.fov_y,
-                   ortho_height=height if kind == "ORTHO" else cls.ortho_height,
-                   aspect=width / height, shift_x=centre_x / larger, shift_y=centre_y / larger,
-                   clip_start=float(near), clip_end=float(far))
-
-
-def _as_projection(projection):
-    if isinstance(projection, CameraProjection):
-        return projection
-    return CameraProjection.from_clip_from_view(projection)
-
-
 def view_slice_corners(projection, near_d, far_d):
     """The 8 corners of the view-depth slice ``near_d .. far_d`` in *view* space, (8, 3).
 
     Order: near plane then far plane, each (left, bottom), (right, bottom), (right, top),
     (left, top); so corner ``i`` and ``i + 4`` lie on the same frustum edge.
     """
-    projection = _as_projection(projection)
-    near_d, far_d = _finite("slice near depth", near_d), _finite("slice far depth", far_d)
+    projection = as_projection(projection)
+    near_d, far_d = finite("slice near depth", near_d), finite("slice far depth", far_d)
     if not far_d > near_d:
         raise ValueError(f"slice far depth ({far_d}) must be greater than slice near depth "
                          f"({near_d})")
@@ -388,7 +249,7 @@ def frustum_slice_corners(world_from_view, projection, near_d, far_d):
     """The 8 world-space corners (8, 3) of the camera frustum between view depths
     ``near_d`` and ``far_d`` (scene units). ``projection`` is a ``CameraProjection`` or an
     OpenGL ``clip_from_view`` matrix. Corner order as in ``view_slice_corners``."""
-    world_from_view = _matrix4("world_from_view", world_from_view)
+    world_from_view = matrix4("world_from_view", world_from_view)
     return _transform_points(world_from_view, view_slice_corners(projection, near_d, far_d))
 
 
@@ -407,12 +268,12 @@ def light_view_matrix(light_dir_world, up_hint=None):
     (``world_from_sun[:3, 1]``): it is never parallel to the sun's direction and turns with
     it, so the shadow grid never flips.
     """
-    forward = _vector3("light direction", light_dir_world)
+    forward = vector3("light direction", light_dir_world)
     length = np.linalg.norm(forward)
     if not length > 1e-12:
         raise ValueError(f"light direction must not be zero, got {forward.tolist()}")
     forward = forward / length
-    candidates = [] if up_hint is None else [_vector3("light up hint", up_hint)]
+    candidates = [] if up_hint is None else [vector3("light up hint", up_hint)]
     candidates += [np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0])]
     for up in candidates:
         # NOTE: Gram-Schmidt loses precision as up approaches the light direction; below
@@ -430,7 +291,7 @@ def light_view_matrix(light_dir_world, up_hint=None):
 
 
 def _check_rotation(light_from_world_rot):
-    m = _matrix4("light_from_world rotation", light_from_world_rot)
+    m = matrix4("light_from_world rotation", light_from_world_rot)
     rotation = m[:3, :3]
     if not (np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-6)
             and np.linalg.det(rotation) > 0.0 and np.allclose(m[:3, 3], 0.0, atol=1e-9)
@@ -523,7 +384,7 @@ def round_up_radius(radius):
     A step relative to the radius (not Babylon's fixed 1/16 unit) keeps tiny scenes sharp
     and costs at most ~1.6% of the resolution.
     """
-    radius = _finite("sphere radius", radius)
+    radius = finite("sphere radius", radius)
     if not radius > 0.0:
         raise ValueError(f"sphere radius must be above 0, got {radius}")
     return _round_up_dyadic(radius * (1.0 + 1e-12), bits=7)
@@ -690,7 +551,7 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
     resolution = _resolution("cascade resolution", resolution)
     if resolution < 2:
         raise ValueError(f"cascade resolution must be at least 2 texels, got {resolution}")
-    margin = _finite("occluder margin", occluder_margin)
+    margin = finite("occluder margin", occluder_margin)
     if margin < 0.0:
         raise ValueError(f"occluder margin must not be negative, got {margin}")
 
@@ -700,8 +561,8 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
         if bounding_sphere_world is None:
             centre_world, radius = bounding_sphere(corners)
         else:
-            centre_world = _vector3("bounding sphere centre", bounding_sphere_world[0])
-            radius = _finite("bounding sphere radius", bounding_sphere_world[1])
+            centre_world = vector3("bounding sphere centre", bounding_sphere_world[0])
+            radius = finite("bounding sphere radius", bounding_sphere_world[1])
         radius = round_up_radius(max(radius, 1e-9))
         # NOTE: one texel of slack: the snapped centre may sit up to half a texel from the
         # sphere's centre on each axis, so the box is at least 2r + 1 texel wide and the
@@ -802,12 +663,12 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
     clips from behind the eye) cannot use logarithmic splits; it falls back to uniform
     splits and says so in ``notes``.
     """
-    world_from_view = _matrix4("world_from_view", world_from_view)
-    projection = _as_projection(projection)
+    world_from_view = matrix4("world_from_view", world_from_view)
+    projection = as_projection(projection)
     near, clip_end = projection.clip_start, projection.clip_end
     far = clip_end
     if shadow_distance is not None:
-        shadow_distance = _finite("shadow distance", shadow_distance)
+        shadow_distance = finite("shadow distance", shadow_distance)
         if shadow_distance < 0.0:
             raise ValueError(f"shadow distance must not be negative, got {shadow_distance}")
         if shadow_distance > 0.0:
@@ -889,8 +750,8 @@ def aabbs_in_cascade(aabb_min_world, aabb_max_world, cascade):
 
 def aabb_in_cascade(aabb_min_world, aabb_max_world, cascade):
     """Whether one world AABB may cast into the cascade (see ``aabbs_in_cascade``)."""
-    low = _vector3("AABB min", aabb_min_world)
-    high = _vector3("AABB max", aabb_max_world)
+    low = vector3("AABB min", aabb_min_world)
+    high = vector3("AABB max", aabb_max_world)
     return bool(aabbs_in_cascade(low[None], high[None], cascade)[0])
 
 
@@ -906,13 +767,13 @@ def spot_light_matrices(world_from_light, spot_angle_rad, clip_start, clip_end):
     the cone fits the map's inscribed circle. Object scale is ignored: only the position
     and orientation of ``world_from_light`` count.
     """
-    world_from_light = _matrix4("spot world_from_light", world_from_light)
-    angle = _finite("spot angle", spot_angle_rad)
+    world_from_light = matrix4("spot world_from_light", world_from_light)
+    angle = finite("spot angle", spot_angle_rad)
     if not 0.0 < angle < math.pi:
         raise ValueError(f"spot angle must be between 0 and pi radians (180 degrees) for a "
                          f"shadow map, got {angle}")
-    clip_start, clip_end = _finite("spot clip start", clip_start), \
-        _finite("spot clip end", clip_end)
+    clip_start, clip_end = finite("spot clip start", clip_start), \
+        finite("spot clip end", clip_end)
     if not clip_start > 0.0:
         raise ValueError(f"spot clip start must be above 0, got {clip_start}")
     if not clip_end > clip_start:
@@ -966,7 +827,7 @@ def blend_band_widths(splits, blend_band):
     cascade's depth range, so a band never reaches back past the middle of its cascade.
     The last cascade has no band (0): the far fade handles the shadow distance."""
     splits = np.asarray(splits, dtype=np.float64)
-    band = _finite("blend band", blend_band)
+    band = finite("blend band", blend_band)
     if band < 0.0:
         raise ValueError(f"blend band must not be negative, got {band}")
     widths = np.minimum(band, 0.5 * np.diff(splits))
@@ -1002,8 +863,8 @@ def distance_fade(view_depth, shadow_distance, fade_fraction):
     the shadow distance, linearly, reaching 0 at the shadow distance. ``fade_fraction`` 0
     is a hard cut."""
     depth = np.asarray(view_depth, dtype=np.float64)
-    far = _finite("shadow distance", shadow_distance)
-    fraction = _finite("fade fraction", fade_fraction)
+    far = finite("shadow distance", shadow_distance)
+    fraction = finite("fade fraction", fade_fraction)
     if not 0.0 <= fraction <= 1.0:
         raise ValueError(f"fade fraction must be in 0..1, got {fraction}")
     if fraction == 0.0:

@@ -21,8 +21,9 @@ import time
 import numpy as np
 
 from ..core import cascades
+from ..core.camera import world_positions
 from ..core.shadow_plan import (CASCADE_LINE_COLORS, front_to_back, instance_bounds,
-                                layout_atlas, pack_frame, plan_shadows, world_positions)
+                                layout_atlas, pack_frame, plan_shadows)
 from . import shaders
 from .result import RenderResult
 

@@ -1,0 +1,94 @@
+"""Shadow planning is a pure function of a frame snapshot (``csm_engine.core.shadow_plan``):
+cascades and spot tiles planned, packed into one atlas, and the uniform block filled, all
+without Blender or a GPU."""
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from csm_engine.core import shadow_plan
+from csm_engine.core.camera import CameraProjection, CameraView
+from csm_engine.core.frame import FrameSnapshot, SpotLight, Sun
+from csm_engine.core.frame_layout import FRAME_LAYOUT
+
+SETTINGS = dict(
+    cascade_count=3, split_scheme="HYBRID", split_lambda=0.5, manual_splits=(0.1, 0.3, 0.6),
+    shadow_distance=0.0, resolution=2048, equal_resolution=False, stabilize=True,
+    fade_out=True, fade_fraction=0.1, pcf_radius=1, pcf_pattern="GRID", depth_bias=1.0,
+    slope_bias=1.0, normal_offset=0.5, blend_band=0.1, occluder_margin_auto=True,
+    occluder_margin=0.0, freeze_cascades=False, cull_front_faces=False, debug_view="NONE",
+    debug_shadow_map=0, debug_inset=False, ambient_strength=1.0)
+
+
+def _snapshot(**overrides):
+    world_from_view = np.eye(4)
+    world_from_view[:3, 3] = (0.0, -30.0, 5.0)
+    world_from_view[:3, :3] = [[1, 0, 0], [0, 0, -1], [0, 1, 0]]     # looking along +Y
+    projection = CameraProjection(fov_y=math.radians(50), aspect=16 / 9, clip_start=0.1,
+                                  clip_end=120.0)
+    camera = CameraView(world_from_view, projection.clip_from_view(), 320, 180)
+    settings = SimpleNamespace(**dict(SETTINGS, **overrides))
+    sun = Sun(to_light=np.array([0.3, -0.2, 0.93]) / np.linalg.norm([0.3, -0.2, 0.93]),
+              color=np.ones(3), casts_shadow=True)
+    return FrameSnapshot(camera=camera, settings=settings, sun=sun, scene_name="plan_test")
+
+
+BOUNDS = (np.array([-60.0, -60.0, 0.0]), np.array([60.0, 60.0, 12.0]))
+
+
+def test_three_cascades_of_halving_resolution_cover_the_camera_range():
+    plan = shadow_plan.plan_shadows(_snapshot(), BOUNDS)
+    assert plan.cascade_count == 3
+    assert [t.resolution for t in plan.tiles] == [2048, 1024, 512]
+    assert plan.splits[0] == pytest.approx(0.1) and plan.splits[-1] == pytest.approx(120.0)
+    assert np.all(np.diff(plan.splits) > 0)
+    texels = [t.texel_world for t in plan.tiles]
+    assert texels == sorted(texels), "far cascades cover more metres per texel"
+    assert plan.warnings == []
+
+
+def test_atlas_packs_tiles_without_overlap():
+    snap = _snapshot(equal_resolution=True, cascade_count=4)
+    plan = shadow_plan.plan_shadows(snap, BOUNDS)
+    width, height = shadow_plan.layout_atlas(plan.tiles)
+    assert width <= shadow_plan.MAX_ATLAS_WIDTH
+    boxes = [(t.origin[0], t.origin[1], t.resolution) for t in plan.tiles]
+    for i, (x, y, size) in enumerate(boxes):
+        assert x + size <= width and y + size <= height
+        for (x2, y2, size2) in boxes[i + 1:]:
+            assert x + size <= x2 or x2 + size2 <= x or y + size <= y2 or y2 + size2 <= y
+
+
+def test_impossible_manual_splits_fall_back_to_hybrid_with_a_warning():
+    plan = shadow_plan.plan_shadows(
+        _snapshot(split_scheme="MANUAL", manual_splits=(0.5, 0.2, 0.6)), BOUNDS)
+    assert plan.cascade_count == 3
+    assert any("hybrid" in w for w in plan.warnings), plan.warnings
+
+
+def test_no_sun_shadow_means_no_cascades_but_spot_tiles_still_planned():
+    snap = _snapshot()
+    snap.sun.casts_shadow = False
+    world_from_light = np.eye(4)
+    world_from_light[:3, 3] = (0.0, 0.0, 10.0)
+    snap.spots.append(SpotLight(position=np.array([0.0, 0.0, 10.0]),
+                                direction=np.array([0.0, 0.0, -1.0]), color=np.ones(3),
+                                radius=30.0, spot_size=math.radians(60), spot_blend=0.1,
+                                casts_shadow=True, world_from_light=world_from_light,
+                                clip_start=0.1))
+    plan = shadow_plan.plan_shadows(snap, BOUNDS)
+    assert plan.cascade_count == 0
+    assert len(plan.tiles) == 1 and plan.tiles[0].is_perspective
+    assert plan.spot_tiles == {0: 0}
+
+
+def test_pack_frame_fills_exactly_the_layout():
+    snap = _snapshot()
+    plan = shadow_plan.plan_shadows(snap, BOUNDS)
+    shadow_plan.layout_atlas(plan.tiles)
+    data = shadow_plan.pack_frame(snap, plan)
+    assert data.dtype == np.float32
+    assert data.nbytes == FRAME_LAYOUT.new_data().nbytes
+    assert data.nbytes % 16 == 0, "std140 blocks are whole vec4s"
+    assert np.all(np.isfinite(data))
