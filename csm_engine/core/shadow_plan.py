@@ -169,55 +169,67 @@ def layout_atlas(tiles):
 
 
 def pack_frame(snap, plan):
-    """The lighting pass's uniform block for this frame (std140 float32 array)."""
+    """The frame uniform block for this frame (std140 float32 array, ``FRAME_LAYOUT``)."""
     s = snap.settings
     camera = snap.camera
-    data = FRAME_LAYOUT.new_data()
-    put = FRAME_LAYOUT.set
-    put(data, "clip_from_world", camera.clip_from_world)
-    put(data, "view_from_world", np.linalg.inv(camera.world_from_view))
-    put(data, "world_from_clip", np.linalg.inv(camera.clip_from_world))
-    put(data, "camera_position", [*camera.position, 1.0 if camera.is_perspective else 0.0])
-    put(data, "camera_forward", [*camera.forward, 0.0])
-    put(data, "viewport", [camera.width, camera.height, 1.0 / camera.width, 1.0 / camera.height])
-    put(data, "ambient", [*snap.ambient, 0.0 if snap.film_transparent else 1.0])
-    put(data, "background", [*snap.background, 1.0])
-    if snap.sun is not None:
-        put(data, "sun_direction", [*snap.sun.to_light, 1.0])
-        put(data, "sun_color", [*snap.sun.color, 1.0 if plan.cascade_count else 0.0])
-    fade_start = plan.shadow_distance * (1.0 - s.fade_fraction) if s.fade_out \
-        else plan.shadow_distance * 2.0
-    put(data, "shadow_params", [plan.cascade_count, plan.shadow_distance, fade_start, 0.0])
-    put(data, "filter_params", [s.pcf_radius, PCF_PATTERN_INDEX[s.pcf_pattern],
-                                s.depth_bias, s.slope_bias])
     points = snap.points[:MAX_POINT_LIGHTS]
     spots = snap.spots[:MAX_SPOT_LIGHTS]
-    put(data, "bias_params", [s.normal_offset, len(spots), len(points), 0.0])
-    put(data, "debug_params", [DEBUG_VIEW_INDEX[s.debug_view], s.debug_shadow_map,
-                               1.0 if s.debug_inset else 0.0, 0.0])
-    far = np.full(MAX_CASCADES, 1e30)
-    near = np.zeros(MAX_CASCADES)
-    far[:plan.cascade_count] = plan.splits[1:plan.cascade_count + 1]
-    near[:plan.cascade_count] = plan.splits[:plan.cascade_count]
-    put(data, "cascade_splits", far)
-    put(data, "cascade_near", near)
-    put(data, "cascade_band", plan.bands[:MAX_CASCADES])
-    for t, tile in enumerate(plan.tiles):
-        put(data, "shadow_from_world", WINDOW_FROM_CLIP @ tile.clip_from_world, t)
-        put(data, "shadow_tiles", [tile.origin[0], tile.origin[1], tile.resolution,
-                                   tile.texel_world], t)
-        put(data, "shadow_depth", [tile.near, tile.far, 1.0 if tile.is_perspective else 0.0,
-                                   tile.display_near], t)
-    for i, light in enumerate(points):
-        put(data, "point_lights", [*light.position, light.radius], 2 * i)
-        put(data, "point_lights", [*light.color, 0.0], 2 * i + 1)
+    sun = snap.sun
+    fade_start = plan.shadow_distance * (1.0 - s.fade_fraction) if s.fade_out \
+        else plan.shadow_distance * 2.0
+    count = plan.cascade_count
+    bands = plan.bands[:MAX_CASCADES]
+    # Cascades not in use end at 1e30, so a selection loop that passed them finds nothing.
+    cascade_rows = [dict(near_depth=plan.splits[i] if i < count else 0.0,
+                         far_depth=plan.splits[i + 1] if i < count else 1e30,
+                         blend_band=bands[i] if i < len(bands) else 0.0)
+                    for i in range(MAX_CASCADES)]
+    tile_rows = [dict(shadow_from_world=WINDOW_FROM_CLIP @ tile.clip_from_world,
+                      atlas_origin=tile.origin, resolution=tile.resolution,
+                      texel_world=tile.texel_world, light_near=tile.near, light_far=tile.far,
+                      is_perspective=int(tile.is_perspective), display_near=tile.display_near)
+                 for tile in plan.tiles]
+    point_rows = [dict(position=light.position, radius=light.radius, color=light.color)
+                  for light in points]
+    spot_rows = []
     for i, spot in enumerate(spots):
         cos_outer, cos_inner = spot_cone_cosines(spot)
-        put(data, "spot_lights", [*spot.position, spot.radius], 4 * i)
-        put(data, "spot_lights", [*spot.color, plan.spot_tiles.get(i, -1)], 4 * i + 1)
-        put(data, "spot_lights", [*spot.direction, cos_outer], 4 * i + 2)
-        put(data, "spot_lights", [cos_inner, 0.0, 0.0, 0.0], 4 * i + 3)
-    return data
+        spot_rows.append(dict(position=spot.position, radius=spot.radius, color=spot.color,
+                              shadow_tile=plan.spot_tiles.get(i, -1), direction=spot.direction,
+                              cos_outer=cos_outer, cos_inner=cos_inner))
+    return FRAME_LAYOUT.pack(dict(
+        clip_from_world=camera.clip_from_world,
+        view_from_world=np.linalg.inv(camera.world_from_view),
+        world_from_clip=np.linalg.inv(camera.clip_from_world),
+        camera_position=camera.position,
+        is_perspective=int(bool(camera.is_perspective)),
+        camera_forward=camera.forward,
+        viewport_size=(camera.width, camera.height),
+        ambient_color=snap.ambient,
+        background_alpha=0.0 if snap.film_transparent else 1.0,
+        background_color=snap.background,
+        sun_direction=sun.to_light if sun is not None else (0.0, 0.0, 0.0),
+        has_sun=int(sun is not None),
+        sun_color=sun.color if sun is not None else (0.0, 0.0, 0.0),
+        sun_casts_shadow=int(sun is not None and count > 0),
+        cascade_count=count,
+        shadow_distance=plan.shadow_distance,
+        fade_start_depth=fade_start,
+        pcf_radius_texels=s.pcf_radius,
+        pcf_pattern=PCF_PATTERN_INDEX[s.pcf_pattern],
+        depth_bias_texels=s.depth_bias,
+        slope_bias_texels=s.slope_bias,
+        normal_offset_texels=s.normal_offset,
+        point_light_count=len(points),
+        spot_light_count=len(spots),
+        debug_view=DEBUG_VIEW_INDEX[s.debug_view],
+        debug_shadow_map=s.debug_shadow_map,
+        debug_inset=int(bool(s.debug_inset)),
+        cascades=cascade_rows,
+        shadow_tiles=tile_rows,
+        point_lights=point_rows,
+        spot_lights=spot_rows,
+    ))
 
 
 def front_to_back(snap, bounds_lo_hi):

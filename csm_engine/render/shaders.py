@@ -5,8 +5,10 @@ Owns every ``gpu.types.GPUShader`` the pipeline uses. GLSL lives as real files i
 mechanism), and each included file gets its own ``#line N id`` so compiler messages can be
 mapped back to ``file.glsl:line``.
 
-Uniform blocks are described once, in Python (``UniformLayout``), which generates both the
-std140 GLSL struct and the numpy packing, so the two can never disagree.
+The frame uniform block is described once, in ``core/frame_layout.py`` (``FRAME_LAYOUT``),
+which generates both the std140 GLSL structs and the numpy packing, so the two can never
+disagree; the limits and enums the GLSL uses (``MAX_*``, ``DEBUG_*``, ``PCF_*``) come from
+the same module's ``glsl_defines()`` and are given to every program here.
 
 ``ShaderLibrary.reload()`` compiles everything anew and swaps only if every program
 compiled: on an error the last good shaders keep running and ``last_error`` says why.
@@ -18,7 +20,7 @@ import sys
 import tempfile
 
 from ..core import paths
-from ..core.frame_layout import FRAME_LAYOUT, MAX_CASCADES, MAX_POINT_LIGHTS, MAX_SPOT_LIGHTS
+from ..core.frame_layout import FRAME_LAYOUT, glsl_defines
 
 # --------------------------------------------------------------------------------------
 # Program descriptions
@@ -194,10 +196,8 @@ def _build(program_name, spec, directory):
         info.uniform_buf(0, FRAME_LAYOUT.type_name, "frame")
     for slot, (kind, name) in enumerate(spec["outputs"]):
         info.fragment_out(slot, kind, name)
-    info.define("MAX_CASCADES", str(MAX_CASCADES))
-    info.define("MAX_POINT_LIGHTS", str(MAX_POINT_LIGHTS))
-    info.define("MAX_SPOT_LIGHTS", str(MAX_SPOT_LIGHTS))
-    for name, value in spec.get("defines", ()):
+    defines = [*glsl_defines(), *spec.get("defines", ())]
+    for name, value in defines:
         info.define(name, value)
     info.vertex_source(vertex)
     info.fragment_source(fragment)
@@ -214,8 +214,6 @@ def _build(program_name, spec, directory):
         if not any(_LOCATION.search(error) for error in errors):
             # Blender 3.4/4.2 drop the location (see shader_diagnostics): ask the driver.
             from . import shader_diagnostics
-            defines = [("MAX_CASCADES", MAX_CASCADES), ("MAX_POINT_LIGHTS", MAX_POINT_LIGHTS),
-                       ("MAX_SPOT_LIGHTS", MAX_SPOT_LIGHTS), *spec.get("defines", ())]
             driver = shader_diagnostics.driver_log(
                 spec, {"vertex": vertex, "fragment": fragment}, defines,
                 FRAME_LAYOUT.glsl() if spec["frame"] else "",

@@ -1,84 +1,63 @@
 /* Shared lighting and shadow code: cascade selection, shadow-atlas lookup with bias and PCF,
  * Blinn-Phong, debug colour ramps. Included by lighting_frag.glsl.
  *
- * Shadow atlas tiles (one per cascade, then one per shadowed spot light):
- *   frame.shadow_from_world[t] : world -> tile window coordinates (0..1 in x, y and depth)
- *   frame.shadow_tiles[t]      : atlas origin x, y (texels), resolution (texels),
- *                                world size of one texel (orthographic) or, for perspective
- *                                tiles, texel size per unit of distance from the light
- *   frame.shadow_depth[t]      : light near, light far, 1 if perspective, scene's nearest
- *                                depth in this light (for the shadow-map debug view)
- */
-
-#define DEBUG_NONE 0
-#define DEBUG_CASCADES 1
-#define DEBUG_SHADOW_FACTOR 2
-#define DEBUG_SHADOW_MAP 3
-#define DEBUG_TEXEL_DENSITY 4
-#define DEBUG_ALBEDO 5
-#define DEBUG_NORMAL 6
-#define DEBUG_POSITION 7
-#define DEBUG_DEPTH 8
-#define DEBUG_SPECULAR 9
-
-#define PCF_GRID 0
-#define PCF_CROSS5 1
-#define PCF_NINE_TAP 2
+ * frame (FrameData, with ShadowTileData, CascadeData, ...) and the constants DEBUG_*, PCF_*,
+ * MAX_* come from core/frame_layout.py, which generates the struct text and the #defines:
+ * the field meanings and units are documented there. */
 
 /* Distance from the light plane (orthographic) or light position (perspective) for a
  * window depth 0..1 stored in the atlas. Comparing linear distances lets one bias in scene
  * units serve both projections. */
-float shadow_linear_depth(float window_depth, vec4 depth_info)
+float shadow_linear_depth(float window_depth, ShadowTileData tile)
 {
-  float near = depth_info.x, far = depth_info.y;
-  if (depth_info.z > 0.5) {
+  float near = tile.light_near, far = tile.light_far;
+  if (tile.is_perspective != 0) {
     float ndc = window_depth * 2.0 - 1.0;
     return 2.0 * near * far / (far + near - ndc * (far - near));
   }
   return near + window_depth * (far - near);
 }
 
-float shadow_tap(vec4 tile, vec4 depth_info, vec2 texel, float receiver, float bias)
+float shadow_tap(ShadowTileData tile, vec2 texel, float receiver, float bias)
 {
-  ivec2 p = ivec2(clamp(floor(texel), vec2(0.0), vec2(tile.z - 1.0))) + ivec2(tile.xy);
-  float occluder = shadow_linear_depth(texelFetch(shadow_atlas, p, 0).r, depth_info);
+  ivec2 p = ivec2(clamp(floor(texel), vec2(0.0), vec2(tile.resolution - 1.0))) +
+            ivec2(tile.atlas_origin);
+  float occluder = shadow_linear_depth(texelFetch(shadow_atlas, p, 0).r, tile);
   return (receiver - bias > occluder) ? 0.0 : 1.0;
 }
 
 /* Visibility (1 lit, 0 shadowed) of world point p with normal n from shadow tile t. */
 float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l)
 {
-  vec4 tile = frame.shadow_tiles[t];
-  vec4 depth_info = frame.shadow_depth[t];
-  mat4 shadow_from_world = frame.shadow_from_world[t];
+  ShadowTileData tile = frame.shadow_tiles[t];
 
-  float texel_world = tile.w;
-  if (depth_info.z > 0.5) {
+  float texel_world = tile.texel_world;
+  if (tile.is_perspective != 0) {
     /* Perspective: a texel covers more of the world the further it is from the light. */
-    vec4 s0 = shadow_from_world * vec4(p, 1.0);
-    texel_world *= shadow_linear_depth(clamp(s0.z / s0.w, 0.0, 1.0), depth_info);
+    vec4 s0 = tile.shadow_from_world * vec4(p, 1.0);
+    texel_world *= shadow_linear_depth(clamp(s0.z / s0.w, 0.0, 1.0), tile);
   }
   float cos_l = clamp(n_dot_l, 0.05, 1.0);
   float tan_l = min(sqrt(1.0 - cos_l * cos_l) / cos_l, 10.0);
   /* NOTE: all three biases are given in texels and converted here with this tile's world
    * texel size, so one setting holds in every cascade whatever its resolution and extent. */
-  float normal_offset = frame.bias_params.x * texel_world * (1.0 - n_dot_l * 0.5);
-  float pcf_radius = frame.filter_params.x;
-  float bias = texel_world * (frame.filter_params.z + frame.filter_params.w * tan_l *
+  float normal_offset = frame.normal_offset_texels * texel_world * (1.0 - n_dot_l * 0.5);
+  float pcf_radius = frame.pcf_radius_texels;
+  float bias = texel_world * (frame.depth_bias_texels + frame.slope_bias_texels * tan_l *
                               (1.0 + pcf_radius));
 
-  vec4 s = shadow_from_world * vec4(p + n * normal_offset, 1.0);
+  vec4 s = tile.shadow_from_world * vec4(p + n * normal_offset, 1.0);
   s.xyz /= s.w;
   if (s.x < 0.0 || s.x > 1.0 || s.y < 0.0 || s.y > 1.0 || s.z > 1.0) {
     return 1.0; /* Outside the tile: nothing was rendered there to cast a shadow. */
   }
-  float receiver = shadow_linear_depth(max(s.z, 0.0), depth_info);
-  vec2 texel = s.xy * tile.z;
+  float receiver = shadow_linear_depth(max(s.z, 0.0), tile);
+  vec2 texel = s.xy * tile.resolution;
 
   int radius = int(pcf_radius);
-  int pattern = int(frame.filter_params.y);
+  int pattern = frame.pcf_pattern;
   if (radius == 0) {
-    return shadow_tap(tile, depth_info, texel, receiver, bias);
+    return shadow_tap(tile, texel, receiver, bias);
   }
   float lit = 0.0;
   float taps = 0.0;
@@ -95,24 +74,24 @@ float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l)
       for (int x = 0; x <= last; x++) {
         float wx = (x == 0) ? 1.0 - f.x : ((x == last) ? f.x : 1.0);
         vec2 center = base + vec2(float(x - radius), float(y - radius)) + 0.5;
-        lit += wx * wy * shadow_tap(tile, depth_info, center, receiver, bias);
+        lit += wx * wy * shadow_tap(tile, center, receiver, bias);
       }
     }
     taps = float(last * last);
   }
   else {
     float r = float(radius);
-    lit = shadow_tap(tile, depth_info, texel, receiver, bias);
-    lit += shadow_tap(tile, depth_info, texel + vec2(r, 0.0), receiver, bias);
-    lit += shadow_tap(tile, depth_info, texel + vec2(-r, 0.0), receiver, bias);
-    lit += shadow_tap(tile, depth_info, texel + vec2(0.0, r), receiver, bias);
-    lit += shadow_tap(tile, depth_info, texel + vec2(0.0, -r), receiver, bias);
+    lit = shadow_tap(tile, texel, receiver, bias);
+    lit += shadow_tap(tile, texel + vec2(r, 0.0), receiver, bias);
+    lit += shadow_tap(tile, texel + vec2(-r, 0.0), receiver, bias);
+    lit += shadow_tap(tile, texel + vec2(0.0, r), receiver, bias);
+    lit += shadow_tap(tile, texel + vec2(0.0, -r), receiver, bias);
     taps = 5.0;
     if (pattern == PCF_NINE_TAP) {
-      lit += shadow_tap(tile, depth_info, texel + vec2(r, r), receiver, bias);
-      lit += shadow_tap(tile, depth_info, texel + vec2(-r, r), receiver, bias);
-      lit += shadow_tap(tile, depth_info, texel + vec2(r, -r), receiver, bias);
-      lit += shadow_tap(tile, depth_info, texel + vec2(-r, -r), receiver, bias);
+      lit += shadow_tap(tile, texel + vec2(r, r), receiver, bias);
+      lit += shadow_tap(tile, texel + vec2(-r, r), receiver, bias);
+      lit += shadow_tap(tile, texel + vec2(r, -r), receiver, bias);
+      lit += shadow_tap(tile, texel + vec2(-r, -r), receiver, bias);
       taps = 9.0;
     }
   }
@@ -122,9 +101,9 @@ float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l)
 /* Index of the cascade whose slice holds this view depth, or -1 beyond the last. */
 int cascade_index(float view_depth)
 {
-  int count = int(frame.shadow_params.x);
+  int count = frame.cascade_count;
   for (int i = 0; i < MAX_CASCADES; i++) {
-    if (i < count && view_depth <= frame.cascade_splits[i]) {
+    if (i < count && view_depth <= frame.cascades[i].far_depth) {
       return i;
     }
   }
@@ -142,17 +121,17 @@ float sun_visibility(vec3 p, vec3 n, float n_dot_l, float view_depth, out float 
     return 1.0;
   }
   float vis = shadow_tile_visibility(i, p, n, n_dot_l);
-  int count = int(frame.shadow_params.x);
-  float split = frame.cascade_splits[i];
-  float band = frame.cascade_band[i];
+  int count = frame.cascade_count;
+  float split = frame.cascades[i].far_depth;
+  float band = frame.cascades[i].blend_band;
   if (i + 1 < count && band > 0.0 && view_depth > split - band) {
     /* The next cascade's box was fitted from split - band on, so it covers this point. */
     float w = clamp((view_depth - (split - band)) / band, 0.0, 1.0);
     vis = mix(vis, shadow_tile_visibility(i + 1, p, n, n_dot_l), w);
     cascade_out += w;
   }
-  float fade_start = frame.shadow_params.z;
-  float distance = frame.shadow_params.y;
+  float fade_start = frame.fade_start_depth;
+  float distance = frame.shadow_distance;
   if (distance > fade_start && view_depth > fade_start) {
     vis = mix(vis, 1.0, clamp((view_depth - fade_start) / (distance - fade_start), 0.0, 1.0));
   }

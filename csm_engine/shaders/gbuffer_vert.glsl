@@ -8,6 +8,6 @@ void main()
   tex_coord = uv;
   /* Linear in the world position, so interpolation gives the exact per-pixel value; the
    * lighting pass rebuilds the world position from it (4 bytes a pixel instead of 16). */
-  view_depth = dot(world.xyz - frame.camera_position.xyz, frame.camera_forward.xyz);
+  view_depth = dot(world.xyz - frame.camera_position, frame.camera_forward);
   gl_Position = frame.clip_from_world * world;
 }

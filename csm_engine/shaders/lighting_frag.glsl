@@ -5,21 +5,21 @@
 
 vec3 show_shadow_map(int t, vec2 uv)
 {
-  vec4 tile = frame.shadow_tiles[t];
-  vec4 depth_info = frame.shadow_depth[t];
-  ivec2 p = ivec2(clamp(uv, 0.0, 1.0) * (tile.z - 1.0)) + ivec2(tile.xy);
-  float linear = shadow_linear_depth(texelFetch(shadow_atlas, p, 0).r, depth_info);
-  /* depth_info.w: where the scene's bounds begin in this light's depth, so the grey ramp
-   * spans the content rather than the (mostly empty) occluder margin. */
-  return vec3((linear - depth_info.w) / max(depth_info.y - depth_info.w, 1e-6));
+  ShadowTileData tile = frame.shadow_tiles[t];
+  ivec2 p = ivec2(clamp(uv, 0.0, 1.0) * (tile.resolution - 1.0)) + ivec2(tile.atlas_origin);
+  float linear = shadow_linear_depth(texelFetch(shadow_atlas, p, 0).r, tile);
+  /* From where the scene's bounds begin in this light's depth, so the grey ramp spans the
+   * content rather than the (mostly empty) occluder margin. */
+  return vec3((linear - tile.display_near) / max(tile.light_far - tile.display_near, 1e-6));
 }
 
 /* Where a square shadow-map view sits on screen: full screen (centred square) or inset. */
 bool shadow_map_uv(vec2 pixel, out vec2 uv)
 {
-  vec2 size = frame.viewport.xy;
-  float side = frame.debug_params.z > 0.5 ? 0.35 * min(size.x, size.y) : min(size.x, size.y);
-  vec2 origin = frame.debug_params.z > 0.5 ? vec2(8.0) : 0.5 * (size - vec2(side));
+  vec2 size = frame.viewport_size;
+  bool inset = frame.debug_inset != 0;
+  float side = inset ? 0.35 * min(size.x, size.y) : min(size.x, size.y);
+  vec2 origin = inset ? vec2(8.0) : 0.5 * (size - vec2(side));
   uv = (pixel - origin) / side;
   return all(greaterThanEqual(uv, vec2(0.0))) && all(lessThanEqual(uv, vec2(1.0)));
 }
@@ -34,30 +34,31 @@ vec3 world_position_at(vec2 uv, float view_depth)
   vec4 b = frame.world_from_clip * vec4(ndc, 1.0, 1.0);
   vec3 near_point = a.xyz / a.w;
   vec3 far_point = b.xyz / b.w;
-  float near_depth = dot(near_point - frame.camera_position.xyz, frame.camera_forward.xyz);
-  float far_depth = dot(far_point - frame.camera_position.xyz, frame.camera_forward.xyz);
+  float near_depth = dot(near_point - frame.camera_position, frame.camera_forward);
+  float far_depth = dot(far_point - frame.camera_position, frame.camera_forward);
   return mix(near_point, far_point, (view_depth - near_depth) / (far_depth - near_depth));
 }
 
 void main()
 {
-  vec2 pixel = screen_uv * frame.viewport.xy;
+  vec2 pixel = screen_uv * frame.viewport_size;
   ivec2 px = ivec2(pixel);
   vec4 albedo_spec = texelFetch(gbuffer_albedo, px, 0);
   vec4 normal_shine = texelFetch(gbuffer_normal, px, 0);
   float depth = texelFetch(gbuffer_depth, px, 0).r;
-  int debug_view = int(frame.debug_params.x);
-  int shadow_tile_count = int(frame.shadow_params.x) + int(frame.bias_params.y);
+  int debug_view = frame.debug_view;
+  bool inset = frame.debug_inset != 0;
+  int shadow_tile_count = frame.cascade_count + frame.spot_light_count;
 
-  if (debug_view == DEBUG_SHADOW_MAP || frame.debug_params.z > 0.5) {
+  if (debug_view == DEBUG_SHADOW_MAP || inset) {
     vec2 uv;
-    int t = clamp(int(frame.debug_params.y), 0, max(shadow_tile_count - 1, 0));
+    int t = clamp(frame.debug_shadow_map, 0, max(shadow_tile_count - 1, 0));
     if (shadow_tile_count > 0 && shadow_map_uv(pixel, uv)) {
       out_color = vec4(show_shadow_map(t, uv), 1.0);
       out_aux = vec4(1.0, -1.0, 0.0, 1.0);
       return;
     }
-    if (debug_view == DEBUG_SHADOW_MAP && frame.debug_params.z < 0.5) {
+    if (debug_view == DEBUG_SHADOW_MAP && !inset) {
       out_color = vec4(0.0, 0.0, 0.0, 1.0);
       out_aux = vec4(1.0, -1.0, 0.0, 1.0);
       return;
@@ -66,7 +67,7 @@ void main()
 
   if (depth <= 0.0) {
     /* Background: the World colour; alpha 0 with Film > Transparent. */
-    out_color = vec4(frame.background.rgb, frame.ambient.a);
+    out_color = vec4(frame.background_color, frame.background_alpha);
     out_aux = vec4(1.0, -1.0, 1e10, 0.0);
     return;
   }
@@ -76,18 +77,18 @@ void main()
   vec3 albedo = albedo_spec.rgb;
   float specular = albedo_spec.a;
   float shininess = normal_shine.w;
-  vec3 to_camera = frame.camera_position.w > 0.5 ? normalize(frame.camera_position.xyz - p) :
-                                                   -frame.camera_forward.xyz;
+  vec3 to_camera = frame.is_perspective != 0 ? normalize(frame.camera_position - p) :
+                                               -frame.camera_forward;
   float view_depth = depth;
 
-  vec3 color = frame.ambient.rgb * albedo;
+  vec3 color = frame.ambient_color * albedo;
 
   float sun_vis = 1.0;
   float cascade = -1.0;
-  if (frame.sun_direction.w > 0.5) {
-    vec3 l = normalize(frame.sun_direction.xyz);
+  if (frame.has_sun != 0) {
+    vec3 l = normalize(frame.sun_direction);
     float n_dot_l = dot(n, l);
-    if (frame.sun_color.w > 0.5) {
+    if (frame.sun_casts_shadow != 0) {
       if (n_dot_l > 0.0) {
         sun_vis = sun_visibility(p, n, n_dot_l, view_depth, cascade);
       }
@@ -99,47 +100,43 @@ void main()
         cascade = float(c);
       }
     }
-    color += frame.sun_color.rgb * blinn_phong(albedo, specular, shininess, n, l, to_camera) *
+    color += frame.sun_color * blinn_phong(albedo, specular, shininess, n, l, to_camera) *
              sun_vis;
   }
 
-  int point_count = int(frame.bias_params.z);
+  int point_count = frame.point_light_count;
   for (int i = 0; i < MAX_POINT_LIGHTS; i++) {
     if (i >= point_count) {
       break;
     }
-    vec4 pos_radius = frame.point_lights[2 * i];
-    vec3 to_light = pos_radius.xyz - p;
+    PointLightData light = frame.point_lights[i];
+    vec3 to_light = light.position - p;
     float d = length(to_light);
     /* The course's falloff: linear to zero at the light's radius. */
-    float attenuation = 1.0 - min(d / max(pos_radius.w, 1e-6), 1.0);
+    float attenuation = 1.0 - min(d / max(light.radius, 1e-6), 1.0);
     if (attenuation > 0.0) {
-      color += frame.point_lights[2 * i + 1].rgb * attenuation *
+      color += light.color * attenuation *
                blinn_phong(albedo, specular, shininess, n, to_light / max(d, 1e-6), to_camera);
     }
   }
 
-  int spot_count = int(frame.bias_params.y);
-  int cascade_count = int(frame.shadow_params.x);
+  int spot_count = frame.spot_light_count;
   for (int i = 0; i < MAX_SPOT_LIGHTS; i++) {
     if (i >= spot_count) {
       break;
     }
-    vec4 pos_radius = frame.spot_lights[4 * i];
-    vec4 color_tile = frame.spot_lights[4 * i + 1];
-    vec4 dir_outer = frame.spot_lights[4 * i + 2];
-    vec4 inner = frame.spot_lights[4 * i + 3];
-    vec3 to_light = pos_radius.xyz - p;
+    SpotLightData spot = frame.spot_lights[i];
+    vec3 to_light = spot.position - p;
     float d = length(to_light);
     vec3 l = to_light / max(d, 1e-6);
-    float cone = smoothstep(dir_outer.w, inner.x, dot(-l, normalize(dir_outer.xyz)));
-    float attenuation = (1.0 - min(d / max(pos_radius.w, 1e-6), 1.0)) * cone;
+    float cone = smoothstep(spot.cos_outer, spot.cos_inner, dot(-l, normalize(spot.direction)));
+    float attenuation = (1.0 - min(d / max(spot.radius, 1e-6), 1.0)) * cone;
     if (attenuation > 0.0) {
       float vis = 1.0;
-      if (color_tile.w >= 0.0) {
-        vis = shadow_tile_visibility(int(color_tile.w), p, n, dot(n, l));
+      if (spot.shadow_tile >= 0) {
+        vis = shadow_tile_visibility(spot.shadow_tile, p, n, dot(n, l));
       }
-      color += color_tile.rgb * attenuation * vis *
+      color += spot.color * attenuation * vis *
                blinn_phong(albedo, specular, shininess, n, l, to_camera);
     }
   }
@@ -160,10 +157,10 @@ void main()
     }
     else {
       float pixel_world = max(length(dFdx(p)), length(dFdy(p)));
-      float texels_per_pixel = pixel_world / max(frame.shadow_tiles[c].w, 1e-9);
+      float texels_per_pixel = pixel_world / max(frame.shadow_tiles[c].texel_world, 1e-9);
       /* log2 scale: 1/8 texel per pixel -> red, 1 -> green, 8 -> blue. */
       color = heat_color(log2(max(texels_per_pixel, 1e-6)) / 6.0 + 0.5) *
-              (0.35 + 0.65 * clamp(dot(n, normalize(frame.sun_direction.xyz)), 0.0, 1.0));
+              (0.35 + 0.65 * clamp(dot(n, normalize(frame.sun_direction)), 0.0, 1.0));
     }
   }
   else if (debug_view == DEBUG_ALBEDO) {
@@ -174,10 +171,10 @@ void main()
   }
   else if (debug_view == DEBUG_POSITION) {
     /* Bands 1/20 of the shadow distance wide: readable whatever the scene's scale. */
-    color = fract(p * 20.0 / max(frame.shadow_params.y, 1e-6));
+    color = fract(p * 20.0 / max(frame.shadow_distance, 1e-6));
   }
   else if (debug_view == DEBUG_DEPTH) {
-    color = vec3(clamp(view_depth / max(frame.shadow_params.y, 1e-6), 0.0, 1.0));
+    color = vec3(clamp(view_depth / max(frame.shadow_distance, 1e-6), 0.0, 1.0));
   }
   else if (debug_view == DEBUG_SPECULAR) {
     color = vec3(specular, shininess / 256.0, 0.0);

@@ -3,7 +3,6 @@ a conftest.py, so ``from conftest import ...`` would depend on which one loaded 
 import bpy
 import numpy as np
 
-from tests.conftest import REPO  # noqa: F401 (re-exported for the bpy tests)
 
 
 def render_result(scene, width=320, height=240):

@@ -6,13 +6,8 @@ test reads like what a user would check by eye.
 import os
 import sys
 
+import bpy
 import pytest
-
-from tests.conftest import REPO
-if REPO not in sys.path:
-    sys.path.insert(0, REPO)
-
-import bpy  # noqa: E402
 
 
 _EXIT_STATUS = {}

@@ -52,7 +52,7 @@ import bpy
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 OUT_DIR = os.path.abspath(sys.argv[sys.argv.index("--") + 1]) if "--" in sys.argv else os.getcwd()
-SCENE_FILE = os.path.join(REPO, "data", "scenes", "default.json")
+SCENE_FILE = os.path.join(REPO, "csm_engine", "data", "scenes", "default.json")
 
 TICK_S = 0.05
 WAIT_LIMIT_S = 30.0          # one condition that never comes true fails the run with its name
@@ -109,7 +109,7 @@ def finish(exit_code):
 
 def count_view_draws():
     """Wrap the engine's view_draw to know when the viewport has really drawn a frame."""
-    from csm_engine import engine
+    from csm_engine.blender import engine
     original = engine.CSMRenderEngine.view_draw
 
     def view_draw(self, context, depsgraph):
@@ -215,19 +215,19 @@ def file_browser():
 
 
 def sun():
-    from csm_engine import light_controls
+    from csm_engine.blender import light_controls
     return light_controls.sun_object(bpy.context.scene)
 
 
 def sun_travel():
-    from csm_engine import light_controls
+    from csm_engine.blender import light_controls
     return [float(v) for v in light_controls.sun_travel(sun())]
 
 
 def camera_state():
     camera = bpy.context.scene.camera
     matrix = camera.matrix_world
-    from csm_engine import operators
+    from csm_engine.blender import operators
     yaw, pitch = operators.yaw_pitch(matrix)
     return {"name": camera.name, "location": [float(v) for v in matrix.translation],
             "forward": [float(-matrix[i][2]) for i in range(3)],
@@ -320,7 +320,7 @@ def scenario():
         bpy.ops.wm.window_close()
     yield until("the Preferences window closed", lambda: window_with('PREFERENCES') is None)
     import csm_engine
-    from csm_engine import ui
+    from csm_engine.blender import ui
     count_view_draws()
     watch_first_person()
     engines = sorted(cls.bl_idname for cls in bpy.types.RenderEngine.__subclasses__())
@@ -383,7 +383,7 @@ def scenario():
     xdotool("key", "Return")
     yield until("Enter in the file browser imported the scene", lambda: (
         file_browser() is None and any(o.type == 'LIGHT' for o in scene.objects)))
-    from csm_engine import scene_builder
+    from csm_engine.blender import scene_builder
     imported = [{"name": c.name, "source": c.get("csm_source")}
                 for c in scene_builder.imported_collections(scene)]
     scene.render.resolution_x, scene.render.resolution_y = 1600, 900
@@ -484,7 +484,7 @@ def scenario():
     REPORT["steps"][-1]["debug_view_after_l"] = views[-1]
 
     # 4. F5 over the viewport reloads the shaders.
-    from csm_engine import shaders
+    from csm_engine.render import shaders
     generation = shaders.LIBRARY.generation
     mouse_to_viewport()
     yield pause(0.2)
@@ -545,7 +545,7 @@ def scenario():
     # 5. Turn the sun in the viewport: click its row in the Outliner (selects only the Sun),
     # then R, Z, 40, Enter with the mouse over the 3D View (Blender's own rotate operator;
     # a turn about world Z changes the azimuth only).
-    from csm_engine import light_controls
+    from csm_engine.blender import light_controls
     sun_before = sun_travel()
     outliner = next(r for a in window.screen.areas if a.type == 'OUTLINER'
                     for r in a.regions if r.type == 'WINDOW')
@@ -680,7 +680,7 @@ def _angle(a, b):
 
 
 def _file_direction():
-    from csm_engine import light_controls
+    from csm_engine.blender import light_controls
     direction = light_controls.file_sun_direction(sun())
     if direction is None:
         raise RuntimeError("the imported Sun has no stored scene-file direction")
@@ -693,7 +693,7 @@ FIRST_PERSON = {"running": False, "invoked": 0}
 def watch_first_person():
     """Wrap the first-person operator's start and end, so the driver knows when a key
     press started it and when Esc ended it (Blender 3.4 lists no running modal operators)."""
-    from csm_engine import operators
+    from csm_engine.blender import operators
     cls = operators.CSM_OT_first_person
     original_invoke, original_finish = cls.invoke, cls._finish
 

@@ -30,7 +30,7 @@ import bpy
 # Never hard-code the clone's location: tests/hosts/gui_driver.py -> repository root.
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 OUT_DIR = os.path.abspath(sys.argv[sys.argv.index("--") + 1]) if "--" in sys.argv else os.getcwd()
-SCENE_FILE = os.path.join(REPO, "data", "scenes", "default.json")
+SCENE_FILE = os.path.join(REPO, "csm_engine", "data", "scenes", "default.json")
 
 TICK_S = 0.05               # timer period while waiting for Blender to draw
 DRAWS_AFTER_SETUP = 1       # complete viewport draws to wait for after the last view change
@@ -69,7 +69,7 @@ def count_view_draws():
 
     Blender looks the method up on the class at every call, so wrapping it after
     registration takes effect for the engine instance the viewport creates."""
-    from csm_engine import engine
+    from csm_engine.blender import engine
     original = engine.CSMRenderEngine.view_draw
 
     def view_draw(self, context, depsgraph):
@@ -105,7 +105,7 @@ def biggest_view3d(window):
 
 def setup():
     import csm_engine
-    from csm_engine import scene_builder
+    from csm_engine.blender import scene_builder
     csm_engine.register()
     count_view_draws()
 
@@ -195,12 +195,12 @@ def render_still():
     render.resolution_x = width
     render.resolution_y = max(int(round(width * VIEWPORT_ASPECT[1] / VIEWPORT_ASPECT[0])), 9)
     render.filepath = os.path.join(OUT_DIR, "render.png")
+    from csm_engine.blender import engine
     started = time.monotonic()
-    bpy.ops.render.render(write_still=True)
+    result = engine.render_final(scene, write_still=True)
     REPORT["timings_s"]["render"] = round(time.monotonic() - started, 3)
-    from csm_engine import engine
-    if engine.LAST_RENDER["error"]:
-        raise RuntimeError("CSM render failed: " + engine.LAST_RENDER["error"])
+    if result.error:
+        raise RuntimeError("CSM render failed: " + result.error)
     if not os.path.isfile(render.filepath):
         raise RuntimeError(f"render.render(write_still=True) did not write {render.filepath}")
     REPORT["render_size"] = [render.resolution_x, render.resolution_y]
@@ -211,9 +211,9 @@ def render_still():
         if obj.type == 'LIGHT':
             obj.data.use_shadow = False
     render.filepath = os.path.join(OUT_DIR, "render_no_shadows.png")
-    bpy.ops.render.render(write_still=True)
-    if engine.LAST_RENDER["error"] or not os.path.isfile(render.filepath):
-        raise RuntimeError(f"the render without shadows failed: {engine.LAST_RENDER['error']}")
+    result = engine.render_final(scene, write_still=True)
+    if result.error or not os.path.isfile(render.filepath):
+        raise RuntimeError(f"the render without shadows failed: {result.error}")
 
 
 def tick():
@@ -231,11 +231,11 @@ def tick():
             log("scene imported, viewport in CSM rendered mode")
             STATE["step"] = "first_draw"
         elif step == "first_draw":
-            from csm_engine import mesh_cache
-            if STATE["draws"] > 0 and mesh_cache.UPLOADS["count"] > 0:
-                REPORT["mesh_uploads"] = mesh_cache.UPLOADS["count"]
+            from csm_engine.render import gpu_mesh
+            if STATE["draws"] > 0 and gpu_mesh.UPLOADS["count"] > 0:
+                REPORT["mesh_uploads"] = gpu_mesh.UPLOADS["count"]
                 REPORT["timings_s"]["first_draw"] = round(elapsed, 3)
-                log(f"engine drew ({mesh_cache.UPLOADS['count']} mesh uploads)")
+                log(f"engine drew ({gpu_mesh.UPLOADS['count']} mesh uploads)")
                 # Whatever the first draw saw, ask for fresh ones with the final view.
                 STATE["draws_at_mark"] = STATE["draws"]
                 STATE["area"].tag_redraw()

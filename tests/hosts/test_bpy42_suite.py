@@ -13,9 +13,9 @@ import subprocess
 
 import pytest
 
-pytestmark = pytest.mark.hosts
-
 from tests.conftest import REPO
+
+pytestmark = pytest.mark.hosts
 SUITE_TIMEOUT_S = 900
 
 

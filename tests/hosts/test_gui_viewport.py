@@ -231,7 +231,7 @@ def test_driver_ran_the_csm_viewport_in_blender_3_4(viewport_run):
     assert report["window_size"] == list(SCREEN_SIZE), report["window_size"]
     assert report["viewport_draws"] >= 2, report
     assert report["mesh_uploads"] >= 1, report
-    assert report["scene_file"].endswith(os.path.join("data", "scenes", "default.json"))
+    assert report["scene_file"].endswith(os.path.join("csm_engine", "data", "scenes", "default.json"))
     # Blender's full-window screenshot and the frame rectangle use the same pixels.
     window = load_png(viewport_run.path("viewport.png"))
     assert window.shape[:2] == (SCREEN_SIZE[1], SCREEN_SIZE[0]), window.shape

@@ -87,7 +87,7 @@ def _host_command(hosts, host, script, *args):
 @pytest.mark.parametrize("host", ["blender 3.4", "bpy 4.2", "bpy 5.0"])
 def test_compile_error_names_file_and_line_on_every_host(hosts, host_dir, host):
     work = host_dir / "work"
-    for name in ("csm_engine", "shaders", "data"):
+    for name in ("csm_engine",):
         shutil.copytree(os.path.join(REPO, name), work / name,
                         ignore=shutil.ignore_patterns("__pycache__"))
     script = host_dir / "probe.py"

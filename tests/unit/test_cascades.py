@@ -1,20 +1,17 @@
-"""Unit tests for csm_engine/cascades.py: the cascade math, without Blender.
+"""Unit tests for csm_engine/core/cascades.py: the cascade math, without Blender.
 
-Run: cd /work/main && /tmp/venv50/bin/python -m pytest tests/unit/test_cascades.py -q -p no:cacheprovider
+Run: ./dev test tests/unit/test_cascades.py
 """
 
 import math
 import re
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from hypothesis import assume, given, settings, strategies as st
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-
-from csm_engine.core import cascades as csm  # noqa: E402
+from csm_engine.core import cascades as csm
 
 RNG_SEED = 20261107
 TOL = 1e-9

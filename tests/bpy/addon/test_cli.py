@@ -12,7 +12,7 @@ import bpy
 import numpy as np
 import pytest
 
-from tests.bpy.bpy_helpers import REPO
+from tests.conftest import REPO
 
 DEFAULT_SCENE = os.path.join(REPO, "csm_engine", "data", "scenes", "default.json")
 

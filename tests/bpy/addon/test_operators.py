@@ -17,7 +17,8 @@ import bpy
 import numpy as np
 import pytest
 
-from tests.bpy.bpy_helpers import REPO, render_scene
+from tests.bpy.bpy_helpers import render_scene
+from tests.conftest import REPO
 from csm_engine.blender import keymap, light_controls, operators, ui
 from csm_engine.core import paths
 from csm_engine.render import shaders

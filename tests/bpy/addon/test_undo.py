@@ -20,7 +20,7 @@ import bpy
 import numpy as np
 import pytest
 
-from tests.bpy.bpy_helpers import REPO
+from tests.conftest import REPO
 from csm_engine.blender import light_controls, operators, scene_builder, settings
 
 DEFAULT_SCENE = os.path.join(REPO, "csm_engine", "data", "scenes", "default.json")
