@@ -1,17 +1,24 @@
-"""The two archives from tools/build.py install and work the way a user would use them.
+"""The packages from tools/build.py install and work the way a user would use them.
 
+* Every package (extension zip, legacy zip, wheel) carries the whole ``csm_engine``
+  package with its ``shaders/`` and ``data/``, and LICENSE; none carries a measuring
+  tool (benchmark, model fetching, ground truth, quality report) or starts processes.
 * The extension zip passes Blender's own validator, then installs through
   ``extensions.package_install_files`` and enables in pip bpy 5.0 and pip bpy 4.2: CSM is
   then a render engine a scene can use, and it renders a lit cube from the installed copy.
 * The legacy zip installs through ``preferences.addon_install`` + ``addon_enable`` in
   Debian's Blender 3.4, and ``blender -b file.blend -E CSM -f 1`` renders the default
   scene with the add-on enabled from the saved preferences.
+* The wheel installs into a fresh virtual environment of pip bpy 5.0 and of pip bpy 4.2,
+  and its ``csm-render`` command renders the default scene with lit and shadowed ground
+  from another directory; ``pip install <checkout>`` installs the same files offline.
 
 Each host runs in its own subprocess with throwaway Blender user folders and a working
-directory outside the checkout, so what runs is the installed archive. The archives are
+directory outside the checkout, so what runs is the installed package. The packages are
 built fresh into a temporary folder by the same command as ``./dev build``.
 """
 
+import ast
 import os
 import shutil
 import subprocess
@@ -24,13 +31,19 @@ import pytest
 
 pytestmark = pytest.mark.hosts
 
-from tests.conftest import REPO
+from tests.conftest import PACKAGE, REPO
 RENDER_SIZE = (160, 120)
 # A pixel counts as lit when the sun adds at least this much to its luminance (0..1 PNG).
 LIT_THRESHOLD = 0.05
 # The smallest share of the frame that must be lit by the sun: a cube or a landscape
 # in view covers far more; an engine that draws nothing covers none.
 MIN_LIT_FRACTION = 0.01
+# Modules of tools/csm_tools: measuring tools that must never reach a user's install.
+MEASURING_TOOLS = {"bench", "bench_models", "bench_scenes", "ground_truth", "quality_report",
+                   "report_io", "csm_tools"}
+# Ways to start another process; the add-on never does (the manifest asks for files only).
+PROCESS_CALLS = {("os", "system"), ("os", "popen"), ("os", "execv"), ("os", "execvp"),
+                 ("os", "spawnv"), ("os", "posix_spawn"), ("os", "fork")}
 
 
 def _manifest():
@@ -44,37 +57,49 @@ def _run_build(repo_root, dist_dir):
                           stdin=subprocess.DEVNULL)
 
 
+def _package_paths(dist_dir, version):
+    return (os.path.join(dist_dir, f"csm_engine-{version}.zip"),
+            os.path.join(dist_dir, f"csm_engine-{version}-legacy.zip"),
+            os.path.join(dist_dir, f"csm_engine-{version}-py3-none-any.whl"))
+
+
 @pytest.fixture(scope="session")
 def archives(tmp_path_factory):
-    """(extension zip, legacy zip) built from this checkout by tools/build.py."""
+    """(extension zip, legacy zip, wheel) built from this checkout by tools/build.py."""
     dist_dir = str(tmp_path_factory.mktemp("dist"))
     result = _run_build(REPO, dist_dir)
     assert result.returncode == 0, f"tools/build.py failed:\n{result.stdout}{result.stderr}"
-    version = _manifest()["version"]
-    extension = os.path.join(dist_dir, f"csm_engine-{version}.zip")
-    legacy = os.path.join(dist_dir, f"csm_engine-{version}-legacy.zip")
-    for path in (extension, legacy):
+    paths = _package_paths(dist_dir, _manifest()["version"])
+    for path in paths:
         assert os.path.isfile(path), f"tools/build.py did not write {path}"
         assert path in result.stdout, f"tools/build.py did not print {path}:\n{result.stdout}"
-    return extension, legacy
+    return paths
 
 
 def _source_files():
-    """What both archives must carry, relative to the package folder."""
-    files = set()
-    for name in os.listdir(os.path.join(REPO, "csm_engine")):
-        if name.endswith(".py"):
-            files.add(name)
-    for resource in ("shaders", "data"):
-        for folder, dirs, names in os.walk(os.path.join(REPO, resource)):
-            dirs[:] = [d for d in dirs if d != "__pycache__" and not d.startswith(".")]
-            for name in names:
-                if not name.startswith(".") and not name.endswith((".pyc", "~")):
-                    files.add(os.path.relpath(os.path.join(folder, name), REPO).replace(os.sep, "/"))
+    """What every package must carry, relative to the package folder: all of csm_engine
+    (code, shaders/, data/) and LICENSE."""
+    files = {"LICENSE"}
+    for folder, dirs, names in os.walk(PACKAGE):
+        dirs[:] = [d for d in dirs if d != "__pycache__" and not d.startswith(".")]
+        for name in names:
+            if not name.startswith(".") and not name.endswith((".pyc", "~")):
+                files.add(os.path.relpath(os.path.join(folder, name), PACKAGE).replace(os.sep, "/"))
     return files
 
 
-# --- the archives themselves -------------------------------------------------------------
+def _bl_info():
+    with open(os.path.join(PACKAGE, "__init__.py"), encoding="utf-8") as handle:
+        tree = ast.parse(handle.read())
+    return next(ast.literal_eval(node.value) for node in tree.body
+                if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "bl_info")
+
+
+def _wheel_info_dir(wheel):
+    return os.path.basename(wheel).split("-py3-")[0] + ".dist-info"
+
+
+# --- the packages themselves -------------------------------------------------------------
 
 def test_extension_zip_has_the_package_at_its_root_with_shaders_and_data(archives):
     names = set(zipfile.ZipFile(archives[0]).namelist())
@@ -82,6 +107,7 @@ def test_extension_zip_has_the_package_at_its_root_with_shaders_and_data(archive
     assert not missing, f"extension zip lacks {sorted(missing)}"
     assert "blender_manifest.toml" in names
     assert "scenes/default.json" not in names and "data/scenes/default.json" in names
+    assert "shaders/common.glsl" in names and "core/paths.py" in names
     stray = [n for n in names if "__pycache__" in n or n.endswith(".pyc") or n.startswith("tests/")]
     assert not stray, f"extension zip carries build droppings: {stray}"
 
@@ -97,6 +123,113 @@ def test_legacy_zip_is_one_csm_engine_folder_with_shaders_and_data(archives):
     assert not stray, f"legacy zip carries build droppings: {stray}"
 
 
+def test_wheel_has_the_package_with_shaders_data_and_a_csm_render_command(archives):
+    wheel = archives[2]
+    info = _wheel_info_dir(wheel)
+    with zipfile.ZipFile(wheel) as bundle:
+        names = set(bundle.namelist())
+        expected = {"csm_engine/" + n for n in _source_files() if n != "LICENSE"}
+        missing = expected - names
+        assert not missing, f"wheel lacks {sorted(missing)}"
+        outside = [n for n in names if not n.startswith(("csm_engine/", info + "/"))]
+        assert not outside, f"wheel has files outside csm_engine/ and {info}/: {outside}"
+        assert {f"{info}/{n}" for n in ("METADATA", "WHEEL", "RECORD", "entry_points.txt",
+                                        "LICENSE")} <= names, sorted(names)
+        wheel_file = bundle.read(f"{info}/WHEEL").decode()
+        assert "Root-Is-Purelib: true" in wheel_file and "Tag: py3-none-any" in wheel_file
+        entry_points = bundle.read(f"{info}/entry_points.txt").decode()
+        assert "[console_scripts]" in entry_points and "csm-render = csm_engine." in entry_points
+        metadata = bundle.read(f"{info}/METADATA").decode()
+        # Users bring their own bpy: the wheel must never pull one in.
+        requires = [line for line in metadata.splitlines() if line.startswith("Requires-Dist:")]
+        assert not [r for r in requires if "bpy" in r.lower()], requires
+        # RECORD lists every other file with its size and hash, as pip checks on install.
+        record = {line.split(",")[0] for line in bundle.read(f"{info}/RECORD").decode().splitlines()}
+        assert record == names, sorted(record ^ names)
+    stray = [n for n in names if "__pycache__" in n or n.endswith(".pyc")]
+    assert not stray, f"wheel carries build droppings: {stray}"
+
+
+def test_every_package_carries_the_gpl_text(archives):
+    with open(os.path.join(REPO, "LICENSE"), "rb") as handle:
+        license_text = handle.read()
+    assert b"GNU GENERAL PUBLIC LICENSE" in license_text and b"Version 3" in license_text
+    assert b"END OF TERMS AND CONDITIONS" in license_text, "LICENSE is not the full GPL-3 text"
+    where = {archives[0]: "LICENSE", archives[1]: "csm_engine/LICENSE",
+             archives[2]: _wheel_info_dir(archives[2]) + "/LICENSE"}
+    for archive, name in where.items():
+        with zipfile.ZipFile(archive) as bundle:
+            assert bundle.read(name) == license_text, f"{archive}: {name} is not LICENSE"
+
+
+def _process_uses(tree):
+    """Every import of subprocess, mention of it by name, and os.system-style call."""
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found += [a.name for a in node.names if a.name.split(".")[0] == "subprocess"]
+        elif isinstance(node, ast.ImportFrom):
+            if (node.module or "").split(".")[0] == "subprocess":
+                found.append(f"from {node.module} import ...")
+            elif node.module == "os":
+                found += [f"from os import {a.name}" for a in node.names
+                          if ("os", a.name) in PROCESS_CALLS]
+        elif isinstance(node, ast.Name) and node.id == "subprocess":
+            found.append("subprocess")
+        elif isinstance(node, ast.Constant) and node.value == "subprocess":
+            found.append("'subprocess'")
+        elif (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name)
+              and (node.value.id, node.attr) in PROCESS_CALLS):
+            found.append(f"{node.value.id}.{node.attr}")
+    return found
+
+
+def _imported_modules(tree):
+    modules = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            modules.update(part for a in node.names for part in a.name.split("."))
+        elif isinstance(node, ast.ImportFrom):
+            modules.update((node.module or "").split("."))
+            modules.update(a.name for a in node.names)
+    return modules
+
+
+def test_no_package_carries_measuring_tools_or_starts_processes(archives):
+    checked = 0
+    for archive in archives:
+        with zipfile.ZipFile(archive) as bundle:
+            for name in bundle.namelist():
+                parts = name.split("/")
+                stems = {os.path.splitext(part)[0] for part in parts}
+                tools = stems & MEASURING_TOOLS
+                assert not tools, f"{archive} ships the measuring tool {name}"
+                if not name.endswith(".py"):
+                    continue
+                source = bundle.read(name).decode("utf-8")
+                tree = ast.parse(source, name)
+                uses = _process_uses(tree)
+                assert not uses, f"{archive}: {name} starts processes: {uses}"
+                imports = _imported_modules(tree) & MEASURING_TOOLS
+                assert not imports, f"{archive}: {name} imports measuring tools {imports}"
+                checked += 1
+    assert checked >= 3 * 20, f"only {checked} Python files found in the packages"
+
+
+def test_one_version_in_manifest_bl_info_pyproject_and_wheel(archives):
+    version = _manifest()["version"]
+    with open(os.path.join(REPO, "pyproject.toml"), "rb") as handle:
+        project = tomllib.load(handle)["project"]
+    # pyproject.toml names no version of its own: tools/build.py takes the manifest's.
+    assert "version" not in project and project["dynamic"] == ["version"], project
+    assert ".".join(map(str, _bl_info()["version"])) == version
+    wheel = archives[2]
+    assert os.path.basename(wheel) == f"csm_engine-{version}-py3-none-any.whl"
+    with zipfile.ZipFile(wheel) as bundle:
+        metadata = bundle.read(_wheel_info_dir(wheel) + "/METADATA").decode()
+    assert f"\nVersion: {version}\n" in metadata, metadata[:300]
+
+
 def test_manifest_and_bl_info_agree(archives):
     manifest = _manifest()
     with zipfile.ZipFile(archives[0]) as bundle:
@@ -107,11 +240,7 @@ def test_manifest_and_bl_info_agree(archives):
     assert manifest["license"] == ["SPDX:GPL-3.0-or-later"]
     # The file permission only: a scene file is data and never needs network or more.
     assert set(manifest["permissions"]) == {"files"}
-    import ast
-    with open(os.path.join(REPO, "csm_engine", "__init__.py"), encoding="utf-8") as handle:
-        tree = ast.parse(handle.read())
-    bl_info = next(ast.literal_eval(node.value) for node in tree.body
-                   if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "bl_info")
+    bl_info = _bl_info()
     assert ".".join(map(str, bl_info["version"])) == manifest["version"]
     assert tuple(bl_info["blender"]) <= (3, 4, 0)
 
@@ -128,12 +257,11 @@ def test_extension_zip_passes_blenders_validator(archives, hosts):
 
 def _copy_checkout(target):
     """The parts of the checkout that tools/build.py reads, in a folder of another name."""
-    for name in ("tools", "csm_engine", "shaders", "data"):
+    for name in ("tools", "csm_engine"):
         shutil.copytree(os.path.join(REPO, name), os.path.join(target, name),
                         ignore=shutil.ignore_patterns("__pycache__"))
-    for name in ("blender_manifest.toml", "LICENSE"):
-        if os.path.isfile(os.path.join(REPO, name)):
-            shutil.copy2(os.path.join(REPO, name), target)
+    for name in ("blender_manifest.toml", "LICENSE", "pyproject.toml", "README.md"):
+        shutil.copy2(os.path.join(REPO, name), target)
 
 
 def test_build_works_from_any_folder_name_and_gives_the_same_archives(archives, tmp_path):
@@ -164,6 +292,23 @@ def test_build_refuses_a_manifest_blender_would_reject_with_one_clear_line(tmp_p
     assert not (clone / "dist" / "csm_engine-0.1.0-legacy.zip").exists()
 
 
+def test_build_refuses_to_ship_without_the_license_or_with_two_versions(tmp_path):
+    clone = tmp_path / "no license"
+    _copy_checkout(str(clone))
+    (clone / "LICENSE").unlink()
+    result = _run_build(str(clone), str(clone / "dist"))
+    assert result.returncode == 1
+    assert "LICENSE is missing" in result.stderr and "Traceback" not in result.stderr, result.stderr
+    assert not any(os.path.isfile(p) for p in _package_paths(str(clone / "dist"), "0.1.0"))
+
+    shutil.copy2(os.path.join(REPO, "LICENSE"), clone / "LICENSE")
+    init = clone / "csm_engine" / "__init__.py"
+    init.write_text(init.read_text().replace('"version": (', '"version": (9, ', 1))
+    result = _run_build(str(clone), str(clone / "dist"))
+    assert result.returncode == 1
+    assert "version mismatch" in result.stderr and "Traceback" not in result.stderr, result.stderr
+
+
 # --- pip bpy hosts: install the extension and render with it -----------------------------
 
 # Runs inside the host. argv: extension zip, output PNG folder. Prints one CSM_RESULT line.
@@ -186,7 +331,8 @@ result["engines"] = {
 package = sys.modules.get("bl_ext.user_default.csm_engine")
 result["package_file"] = getattr(package, "__file__", None)
 if package is not None:
-    paths = sys.modules[package.__name__ + ".paths"]
+    import importlib
+    paths = importlib.import_module(package.__name__ + ".core.paths")
     result["shaders_dir"] = paths.shaders_dir()
     result["default_scene"] = paths.default_scene_path()
 
@@ -389,3 +535,133 @@ def test_blender_3_4_command_line_render_with_csm(legacy_install, hosts):
         assert "Traceback" not in run.output, run.describe()
         pngs[name] = str(png)
     _assert_sun_lights_the_frame(pngs["lit"], pngs["unlit"], hosts, "Blender 3.4 -E CSM")
+
+
+# --- pip bpy hosts: the wheel and its csm-render command ---------------------------------
+
+WHEEL_RENDER = "320x180"
+# The default scene from its own camera: the sun lights about 46 % of the frame and the
+# ridges and towers shadow about 15 % (320x180); these floors leave wide margins while an
+# engine without shadows (0 % shadowed) or without a sun (0 % lit) fails.
+MIN_SUNLIT_FRACTION = 0.10
+MIN_SHADOWED_FRACTION = 0.02
+# In the shaded image, sunlit ground must be brighter than shadowed ground by this much
+# (about 0.17 in the default scene; luminance 0..1).
+MIN_SHADOW_CONTRAST = 0.05
+
+
+def _purelib(python):
+    result = subprocess.run([python, "-c", "import sysconfig; print(sysconfig.get_path('purelib'))"],
+                            capture_output=True, text=True, timeout=60, check=True)
+    return result.stdout.strip()
+
+
+def _fresh_venv(host_python, root):
+    """A new virtual environment of host_python's Python with nothing installed. A .pth
+    appends the host's site-packages so the bpy and numpy users bring are found; csm_engine
+    can only come from what is installed into this venv (its own site-packages is first)."""
+    venv = os.path.join(root, "venv")
+    subprocess.run([host_python, "-m", "venv", "--without-pip", venv], check=True,
+                   capture_output=True, timeout=120)
+    python = os.path.join(venv, "bin", "python")
+    with open(os.path.join(_purelib(python), "host_bpy.pth"), "w") as handle:
+        handle.write(_purelib(host_python) + "\n")
+    return python
+
+
+def _pip_install(venv_python, what, cwd):
+    """`pip install what` into the venv by .venv's pip, offline and ignoring any pip
+    configuration: whatever the package needs must already be there."""
+    command = [sys.executable, "-m", "pip", "--isolated", "--python", venv_python, "install",
+               "--no-index", "--disable-pip-version-check", "--no-input", what]
+    result = subprocess.run(command, capture_output=True, text=True, timeout=600, cwd=cwd,
+                            stdin=subprocess.DEVNULL)
+    assert result.returncode == 0, f"{' '.join(command)} failed:\n{result.stdout}{result.stderr}"
+    return result
+
+
+def _installed_package(venv_python, env, cwd):
+    script = ("import csm_engine, csm_engine.core.paths as p; "
+              "print(csm_engine.__file__); print(p.default_scene_path())")
+    result = subprocess.run([venv_python, "-c", script], capture_output=True, text=True,
+                            env=env, cwd=cwd, timeout=120)
+    assert result.returncode == 0, result.stderr
+    return result.stdout.split()
+
+
+def _csm_render_from_elsewhere(host_python, wheel, host_dir, hosts, what):
+    venv_python = _fresh_venv(host_python, str(host_dir))
+    _pip_install(venv_python, wheel, str(host_dir))
+    command = os.path.join(os.path.dirname(venv_python), "csm-render")
+    assert os.access(command, os.X_OK), f"{what}: pip installed no {command}"
+    elsewhere = host_dir / "some other folder"
+    elsewhere.mkdir()
+    env = hosts.user_dirs_env(str(host_dir))
+    venv_root = os.path.dirname(os.path.dirname(venv_python))
+    package_file, default_scene = _installed_package(venv_python, env, str(elsewhere))
+    assert package_file.startswith(venv_root) and default_scene.startswith(venv_root), (
+        f"{what}: csm_engine was not imported from the venv: {package_file}, {default_scene}")
+
+    # What a user types: no arguments renders the bundled scene to ./csm_default.png.
+    shaded = hosts.run_host([command, "--resolution", WHEEL_RENDER], env, str(elsewhere))
+    assert shaded.returncode == 0, f"{what}: csm-render failed\n{shaded.describe()}"
+    assert "Traceback" not in shaded.output, shaded.describe()
+    factor = hosts.run_host([command, default_scene, "factor.png", "--resolution", WHEEL_RENDER,
+                             "--set", "debug_view=SHADOW_FACTOR"], env, str(elsewhere))
+    assert factor.returncode == 0, f"{what}: csm-render failed\n{factor.describe()}"
+    broken = hosts.run_host([command, "missing.json", "x.png"], env, str(elsewhere))
+    assert broken.returncode == 3, f"{what}: a missing scene should exit 3\n{broken.describe()}"
+    assert "csm: error:" in broken.output and "Traceback" not in broken.output, broken.describe()
+
+    shaded_png, factor_png = elsewhere / "csm_default.png", elsewhere / "factor.png"
+    assert shaded_png.is_file() and factor_png.is_file(), f"{what}: {os.listdir(elsewhere)}"
+    image = hosts.luminance(hosts.read_png(str(shaded_png)))
+    visibility = hosts.luminance(hosts.read_png(str(factor_png)))
+    width, height = (int(v) for v in WHEEL_RENDER.split("x"))
+    assert image.shape == visibility.shape == (height, width), (image.shape, visibility.shape)
+    # SHADOW_FACTOR shows the sun's visibility: white where lit, black where shadowed.
+    sunlit, shadowed = visibility > 0.9, visibility < 0.1
+    assert sunlit.mean() >= MIN_SUNLIT_FRACTION and shadowed.mean() >= MIN_SHADOWED_FRACTION, (
+        f"{what}: {sunlit.mean():.1%} sunlit, {shadowed.mean():.1%} shadowed")
+    contrast = image[sunlit].mean() - image[shadowed].mean()
+    assert contrast >= MIN_SHADOW_CONTRAST, (
+        f"{what}: sunlit ground is only {contrast:.3f} brighter than shadowed ground")
+
+
+def test_wheel_installs_and_csm_render_renders_from_another_folder_in_pip_bpy_5_0(
+        archives, host_dir, hosts):
+    _csm_render_from_elsewhere(hosts.bpy50_python(), archives[2], host_dir, hosts, "pip bpy 5.0")
+
+
+def test_wheel_installs_and_csm_render_renders_from_another_folder_in_pip_bpy_4_2(
+        archives, host_dir, hosts):
+    # pip bpy 4.2 crashes while Python shuts down after a render: the exit code must
+    # still be csm-render's own (0 here, 3 for the missing scene).
+    _csm_render_from_elsewhere(hosts.bpy42_python(), archives[2], host_dir, hosts, "pip bpy 4.2")
+
+
+def _tree(root):
+    return sorted(os.path.relpath(os.path.join(folder, name), root)
+                  for folder, dirs, names in os.walk(root)
+                  if "__pycache__" not in folder for name in names)
+
+
+def test_pip_install_of_a_checkout_installs_what_the_wheel_holds(archives, host_dir, hosts):
+    clone = host_dir / "checkout"
+    _copy_checkout(str(clone))
+    before = _tree(str(clone))
+    venv_python = _fresh_venv(hosts.bpy50_python(), str(host_dir))
+    _pip_install(venv_python, str(clone), str(host_dir))
+    assert _tree(str(clone)) == before, "pip install wrote into the checkout"
+    info = _wheel_info_dir(archives[2])
+    with open(os.path.join(_purelib(venv_python), info, "RECORD")) as handle:
+        # pip compiles what it installs: its .pyc files are listed too, and not shipped.
+        installed = {line.split(",")[0] for line in handle
+                     if line.startswith("csm_engine/") and "/__pycache__/" not in line}
+    with zipfile.ZipFile(archives[2]) as bundle:
+        shipped = {n for n in bundle.namelist() if n.startswith("csm_engine/")}
+    assert installed == shipped, sorted(installed ^ shipped)
+    env = hosts.user_dirs_env(str(host_dir))
+    run = hosts.run_host([os.path.join(os.path.dirname(venv_python), "csm-render"), "--help"],
+                         env, str(host_dir))
+    assert run.returncode == 0 and "usage:" in run.output, run.describe()
