@@ -55,11 +55,11 @@ class ErrorProbe(bpy.types.RenderEngine):
     def render(self, depsgraph):
         for index, (name, broken) in enumerate(CASES):
             directory = os.path.join(work, f"case{index}", "shaders")
-            shutil.copytree(os.path.join(work, "shaders"), directory)
+            shutil.copytree(os.path.join(work, "csm_engine", "shaders"), directory)
             line = break_shader(directory, name, broken)
             message = shaders.ShaderLibrary(directory=directory).reload()
             result["cases"].append({"file": name, "line": line, "message": message})
-        good = shaders.ShaderLibrary(directory=os.path.join(work, "shaders"))
+        good = shaders.ShaderLibrary(directory=os.path.join(work, "csm_engine", "shaders"))
         result["good"] = good.reload()
         del good        # free the GPU shaders while their context is still current
         self.end_result(self.begin_result(0, 0, 4, 4))
@@ -87,9 +87,8 @@ def _host_command(hosts, host, script, *args):
 @pytest.mark.parametrize("host", ["blender 3.4", "bpy 4.2", "bpy 5.0"])
 def test_compile_error_names_file_and_line_on_every_host(hosts, host_dir, host):
     work = host_dir / "work"
-    for name in ("csm_engine",):
-        shutil.copytree(os.path.join(REPO, name), work / name,
-                        ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(os.path.join(REPO, "csm_engine"), work / "csm_engine",
+                    ignore=shutil.ignore_patterns("__pycache__"))
     script = host_dir / "probe.py"
     script.write_text(HOST_SCRIPT, encoding="utf-8")
     command = _host_command(hosts, host, str(script), str(work), json.dumps(CASES))
