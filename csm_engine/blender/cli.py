@@ -12,6 +12,7 @@ import sys
 EXIT_USAGE = 2
 EXIT_SCENE = 3
 EXIT_RENDER = 4
+EXIT_OUTPUT = 5
 
 
 class CLIError(Exception):
@@ -26,7 +27,7 @@ def build_parser(prog="python -m csm_engine"):
         description="Render a CS562-style JSON scene with the CSM engine and save a PNG.")
     parser.add_argument("scene", nargs="?", help="scene .json (default: the bundled scene)")
     parser.add_argument("screenshot", nargs="?", default="csm_default.png",
-                        help="PNG to write (default: csm_default.png)")
+                        help="PNG to write, exactly this path (default: csm_default.png)")
     parser.add_argument("--resolution", default="1280x720", metavar="WxH",
                         help="image size in pixels (default 1280x720)")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
@@ -140,6 +141,57 @@ def list_settings(scene):
                   f"  # {prop.description}")
 
 
+def screenshot_path(text, scene_path):
+    """The absolute path the screenshot goes to, exactly as named, or CLIError: only
+    ``.png``, never a folder or the scene file itself, into a folder that exists."""
+    if not text or not text.strip():
+        raise CLIError("the screenshot path is empty: name a .png file")
+    # Blender reads a leading "//" as "next to the .blend"; on the command line it is
+    # just the root folder.
+    path = os.path.abspath(text)
+    if path.startswith("//"):
+        path = "/" + path.lstrip("/")
+    if os.path.isdir(path):
+        raise CLIError(f"cannot write '{text}': it is a folder; name a .png file in it")
+    if os.path.splitext(path)[1].lower() != ".png":
+        raise CLIError(f"cannot write '{text}': screenshots are PNG only, "
+                       "name the file with .png")
+    if scene_path and os.path.exists(path) and os.path.exists(scene_path) \
+            and os.path.samefile(path, scene_path):
+        raise CLIError(f"cannot write '{text}': it is the scene file")
+    folder = os.path.dirname(path)
+    if not os.path.isdir(folder):
+        raise CLIError(f"cannot write '{text}': folder '{folder}' does not exist")
+    return path
+
+
+def write_render_png(scene, path):
+    """Save the last render's image to exactly ``path`` (replacing it only once the new
+    image is complete), or raise CLIError with the system's reason."""
+    import tempfile
+    import bpy
+    image = bpy.data.images.get("Render Result")
+    if image is None:
+        raise CLIError("the render produced no image", EXIT_RENDER)
+    folder = os.path.dirname(path)
+    try:
+        handle, temporary = tempfile.mkstemp(prefix=".csm-", suffix=".png", dir=folder)
+        os.close(handle)
+    except OSError as error:
+        raise CLIError(f"cannot write '{path}': {error.strerror}", EXIT_OUTPUT) from None
+    try:
+        image.save_render(temporary, scene=scene)
+        if os.path.getsize(temporary) == 0:
+            raise CLIError(f"cannot write '{path}': Blender wrote an empty file", EXIT_OUTPUT)
+        os.replace(temporary, path)
+    except (OSError, RuntimeError) as error:
+        reason = getattr(error, "strerror", None) or " ".join(str(error).split())
+        raise CLIError(f"cannot write '{path}': {reason}", EXIT_OUTPUT) from None
+    finally:
+        if os.path.exists(temporary):
+            os.remove(temporary)
+
+
 def run(argv, prog="python -m csm_engine"):
     parser = build_parser(prog)
     args = parser.parse_args(argv)
@@ -147,23 +199,19 @@ def run(argv, prog="python -m csm_engine"):
     if args.list_settings:
         list_settings(open_scene())
         return 0
-    shot = os.path.abspath(args.screenshot)
-    directory = os.path.dirname(shot)
-    if not os.path.isdir(directory):
-        raise CLIError(f"cannot write '{shot}': folder '{directory}' does not exist")
-
+    from ..core import paths
     from . import engine
-    scene = open_scene(args.scene or "default", args.overrides, resolution)
+    scene_path = args.scene or paths.default_scene_path()
+    shot = screenshot_path(args.screenshot, scene_path)
+    scene = open_scene(scene_path, args.overrides, resolution)
     render = scene.render
     render.engine = "CSM"
     render.image_settings.file_format = 'PNG'
     render.image_settings.color_mode = 'RGBA' if render.film_transparent else 'RGB'
-    render.filepath = shot
-    result = engine.render_final(scene, write_still=True)
+    result = engine.render_final(scene)
     if result.error:
         raise CLIError("render failed: " + result.error, EXIT_RENDER)
-    if not os.path.isfile(shot):
-        raise CLIError(f"render finished but '{shot}' was not written", EXIT_RENDER)
+    write_render_png(scene, shot)
     for warning in result.warnings:
         print(f"csm: warning: {warning}", file=sys.stderr)
     print(f"csm: wrote {shot} ({resolution[0]}x{resolution[1]})")
@@ -183,3 +231,10 @@ def run_reporting_errors(run_command, argv, prog, label):
 
 def main(argv=None, prog="python -m csm_engine"):
     return run_reporting_errors(run, argv, prog, "csm")
+
+
+def console_main():
+    """The ``csm-render`` console command (pip installs): ``python -m csm_engine`` under
+    its own name, with the same exit codes."""
+    from .compat import exit_process
+    exit_process(main(prog="csm-render"))

@@ -109,6 +109,16 @@ def write_pass(render_pass, pixels):
         render_pass.rect.foreach_set(flat)
 
 
+# -- text ---------------------------------------------------------------------------------
+def blf_size(font, size):
+    """``blf.size`` without its dpi argument (removed in 4.0, required before)."""
+    import blf
+    if bpy.app.version >= (4, 0, 0):
+        blf.size(font, size)
+    else:
+        blf.size(font, size, 72)
+
+
 # -- importers ----------------------------------------------------------------------------
 def gltf_importer_needs_numpy_bool():
     """The 3.4/3.5 glTF importer uses ``np.bool``, which numpy 1.24 removed (Debian 12 ships

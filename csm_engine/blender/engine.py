@@ -107,7 +107,12 @@ class CSMRenderEngine(bpy.types.RenderEngine):
 
     def render(self, depsgraph):
         request = _ACTIVE_REQUEST[0] or _Request()
-        request.result = self._render(depsgraph, request)
+        try:
+            request.result = self._render(depsgraph, request)
+        except Exception as error:
+            # Whatever stopped the frame (an impossible camera, a GPU allocation, a bug), the
+            # user gets one line and no image; a black image with a success message is worse.
+            request.result = RenderResult(error=failure_message(error))
         if request.result.error:
             self.report({'ERROR'}, "CSM: " + request.result.error)
         for warning in request.result.warnings:
@@ -135,12 +140,9 @@ class CSMRenderEngine(bpy.types.RenderEngine):
                                  " triangles")
         renderer = pipeline.Pipeline(textures=_FINAL_RENDER_TEXTURES)
         renderer.profile = request.profile
-        try:
-            result = renderer.render_offscreen(
-                snap, cache, with_positions=request.keep_images,
-                with_normals=request.keep_images or _wants_normal_pass(depsgraph))
-        except shaders.ShaderCompileError as error:
-            return RenderResult(error=str(error))
+        result = renderer.render_offscreen(
+            snap, cache, with_positions=request.keep_images,
+            with_normals=request.keep_images or _wants_normal_pass(depsgraph))
         result.timings.update(scene_read=scene_read, mesh_upload=mesh_upload)
         result.upload_bytes = gpu_mesh.UPLOADS["bytes"] - uploaded_before
         self.update_progress(0.9)
@@ -178,25 +180,73 @@ class CSMRenderEngine(bpy.types.RenderEngine):
 
     def view_draw(self, context, depsgraph):
         import gpu
-        if self.cache is None:
-            self.cache = mesh_cache.MeshCache()
-        if self.pipeline is None:
-            self.pipeline = pipeline.Pipeline()
         region = context.region
-        camera = snapshot.camera_from_region(context.region_data, region.width, region.height)
-        snap = snapshot.take(depsgraph, camera, is_viewport=True)
-        self.cache.sync(snap.mesh_sources)
-        snap.mesh_sources = {}
-        gpu.state.blend_set('ALPHA_PREMULT' if snap.film_transparent else 'NONE')
         try:
+            if self.cache is None:
+                self.cache = mesh_cache.MeshCache()
+            if self.pipeline is None:
+                self.pipeline = pipeline.Pipeline()
+            camera = snapshot.camera_from_region(context.region_data, region.width,
+                                                 region.height)
+            snap = snapshot.take(depsgraph, camera, is_viewport=True)
+            self.cache.sync(snap.mesh_sources)
+            snap.mesh_sources = {}
+            gpu.state.blend_set('ALPHA_PREMULT' if snap.film_transparent else 'NONE')
             self.pipeline.draw(snap, self.cache, None, region.width, region.height)
-        except shaders.ShaderCompileError as error:
-            # First compile failed: nothing good to fall back to. Say so once per draw.
-            print(f"CSM: {error}")
+            self._viewport_error = None
+        except Exception as error:
+            # The viewport shows the reason instead of a stale or half-drawn frame; the
+            # console gets it once, not at every redraw.
+            message = failure_message(error)
+            if message != getattr(self, "_viewport_error", None):
+                print(f"CSM: viewport: {message}")
+                self._viewport_error = message
+            draw_message(region.width, region.height, "CSM cannot draw this view: " + message)
         finally:
             gpu.state.blend_set('NONE')
             gpu.state.depth_test_set('NONE')
             gpu.state.depth_mask_set(False)
+
+
+def failure_message(error):
+    """One line for the user about an exception that stopped a frame. Set CSM_DEBUG=1 to
+    also print the traceback (for reporting a bug)."""
+    import os
+    if os.environ.get("CSM_DEBUG"):
+        import traceback
+        traceback.print_exception(type(error), error, error.__traceback__)
+    if isinstance(error, shaders.ShaderCompileError):
+        return str(error)
+    if isinstance(error, MemoryError):
+        return "out of memory (try a smaller resolution or shadow-map size)"
+    text = " ".join(str(error).split()) or type(error).__name__
+    return text if isinstance(error, (ValueError, pipeline.RenderTargetError)) \
+        else f"{type(error).__name__}: {text}"
+
+
+def draw_message(width, height, text):
+    """Clear the viewport to dark grey and write ``text`` on it (wrapped to the width)."""
+    import blf
+    import gpu
+    framebuffer = gpu.state.active_framebuffer_get()
+    framebuffer.clear(color=(0.12, 0.12, 0.12, 1.0))
+    font, size = 0, 14
+    compat.blf_size(font, size)
+    blf.color(font, 1.0, 0.45, 0.35, 1.0)
+    words, lines, line = text.split(), [], ""
+    for word in words:
+        candidate = f"{line} {word}".strip()
+        if line and blf.dimensions(font, candidate)[0] > width - 40:
+            lines.append(line)
+            line = word
+        else:
+            line = candidate
+    lines.append(line)
+    y = height - 40
+    for line in lines:
+        blf.position(font, 20, y, 0)
+        blf.draw(font, line)
+        y -= int(size * 1.6)
 
 
 def apply_depsgraph_updates(cache, updates):

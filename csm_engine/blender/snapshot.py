@@ -51,7 +51,15 @@ def camera_from_region(region_data, width, height):
     return CameraView(np.linalg.inv(view_from_world), clip_from_view, width, height)
 
 
-def settings_snapshot(scene):
+def _significant(value):
+    """A float32 property's value without its binary noise (20.000000298 -> 20.0)."""
+    return float(f"{value:.7g}")
+
+
+def settings_snapshot(scene, warnings=None):
+    """The CSM settings as plain values. A value outside its setting's range (possible
+    from Python or a hand-edited file, which bypass the UI's limits) is clamped and named
+    in ``warnings``, so a frame never runs with 99 cascades or a 1-texel map."""
     csm = scene.csm
     values = {}
     for prop in csm.bl_rna.properties:
@@ -59,8 +67,29 @@ def settings_snapshot(scene):
         if name in ("rna_type", "name"):
             continue
         value = getattr(csm, name)
-        values[name] = tuple(value) if hasattr(value, "__len__") and \
-            not isinstance(value, str) else value
+        if prop.type == 'ENUM':
+            valid = [item.identifier for item in prop.enum_items]
+            if value not in valid:
+                if warnings is not None:
+                    warnings.append(f"setting {name} = {value!r} is not one of "
+                                    f"{', '.join(valid)}; using {prop.default!r}")
+                value = prop.default
+        elif prop.type in {'INT', 'FLOAT'}:
+            items = list(value) if getattr(prop, "is_array", False) else [value]
+            cast = int if prop.type == 'INT' else _significant
+            fixed = []
+            for item in items:
+                clamped = min(max(item, prop.hard_min), prop.hard_max) \
+                    if item == item else prop.hard_min
+                if clamped != item and warnings is not None:
+                    warnings.append(f"setting {name} = {_significant(item):g} is outside "
+                                    f"{prop.hard_min:g}..{prop.hard_max:g}; using "
+                                    f"{_significant(clamped):g}")
+                fixed.append(cast(clamped))
+            value = tuple(fixed) if getattr(prop, "is_array", False) else fixed[0]
+        elif hasattr(value, "__len__") and not isinstance(value, str):
+            value = tuple(value)
+        values[name] = value
     return SimpleNamespace(**values)
 
 
@@ -88,7 +117,9 @@ def _light_radius(light):
 def take(depsgraph, camera, is_viewport=False):
     """Read one frame's worth of plain data out of the evaluated depsgraph."""
     scene = depsgraph.scene_eval if hasattr(depsgraph, "scene_eval") else depsgraph.scene
-    snap = FrameSnapshot(camera=camera, settings=settings_snapshot(scene),
+    warnings = []
+    snap = FrameSnapshot(camera=camera, settings=settings_snapshot(scene, warnings),
+                         warnings=warnings,
                          film_transparent=bool(scene.render.film_transparent),
                          scene_name=scene.name)
     world_color = _world_color(scene.world)

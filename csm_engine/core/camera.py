@@ -18,6 +18,10 @@ import numpy as np
 from .checks import finite, matrix4
 
 
+# Widest far / near ratio a perspective camera is drawn with (see from_clip_from_view).
+MAX_CLIP_RATIO = 1e7
+
+
 @dataclass(frozen=True)
 class CameraProjection:
     """A camera's projection, enough to build the same OpenGL matrix the G-buffer uses.
@@ -98,9 +102,14 @@ class CameraProjection:
         return m
 
     @classmethod
-    def from_clip_from_view(cls, clip_from_view):
+    def from_clip_from_view(cls, clip_from_view, clip_start=None, clip_end=None):
         """Recover the projection from an OpenGL matrix (e.g. Blender's
-        ``calc_matrix_camera`` or a viewport's ``window_matrix``)."""
+        ``calc_matrix_camera`` or a viewport's ``window_matrix``). ``clip_start`` and
+        ``clip_end``, when known exactly, replace the values decoded from the matrix.
+
+        NOTE: a float32 perspective matrix cannot hold a far plane more than ~10^7 times the
+        near one (its z row rounds to -1 and far decodes as infinite); such a far plane is
+        taken as ``MAX_CLIP_RATIO`` x near, which is as far as the depth math can reach."""
         m = matrix4("clip_from_view", clip_from_view)
         if abs(m[3, 2] + 1.0) < 1e-9 and abs(m[3, 3]) < 1e-9:
             kind = "PERSP"
@@ -115,6 +124,13 @@ class CameraProjection:
         else:
             raise ValueError(f"clip_from_view is neither an OpenGL perspective nor an "
                              f"orthographic projection (bottom row {m[3].tolist()})")
+        if kind == "PERSP" and math.isfinite(near) and near > 0.0 and \
+                not (math.isfinite(far) and near < far <= near * MAX_CLIP_RATIO):
+            far = near * MAX_CLIP_RATIO
+        if clip_start is not None:
+            near = clip_start
+        if clip_end is not None:
+            far = clip_end
         if not (width > 0.0 and height > 0.0):
             raise ValueError(f"clip_from_view has a mirrored or empty view window "
                              f"(width {width}, height {height})")
@@ -153,14 +169,16 @@ class CameraView:
 
     def __post_init__(self):
         if self.clip_start is None or self.clip_end is None:
-            projection = self.projection
-            self.clip_start = projection.clip_start if self.clip_start is None else self.clip_start
-            self.clip_end = projection.clip_end if self.clip_end is None else self.clip_end
+            decoded = CameraProjection.from_clip_from_view(self.clip_from_view)
+            self.clip_start = decoded.clip_start if self.clip_start is None else self.clip_start
+            self.clip_end = decoded.clip_end if self.clip_end is None else self.clip_end
         self.clip_start, self.clip_end = float(self.clip_start), float(self.clip_end)
 
     @cached_property
     def projection(self):
-        return CameraProjection.from_clip_from_view(self.clip_from_view)
+        """The lens, with this camera's exact clip range."""
+        return CameraProjection.from_clip_from_view(self.clip_from_view, self.clip_start,
+                                                    self.clip_end)
 
     @property
     def is_perspective(self):

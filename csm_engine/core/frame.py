@@ -60,6 +60,7 @@ class FrameSnapshot:
     background: np.ndarray = field(default_factory=lambda: np.zeros(3))
     film_transparent: bool = False
     scene_name: str = ""
+    warnings: list = field(default_factory=list)      # what the snapshot had to correct
 
 
 

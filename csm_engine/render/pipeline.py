@@ -39,6 +39,15 @@ def _column_major_stack(matrices):
     return matrices.transpose(0, 2, 1).reshape(len(matrices), 16).tolist()
 
 
+_BYTES_PER_TEXEL = {'RGBA32F': 16, 'RGBA16F': 8, 'R32F': 4, 'DEPTH_COMPONENT32F': 4,
+                    'RGBA8': 4}
+
+
+class RenderTargetError(Exception):
+    """A render target or shadow map could not be allocated; the message says which and
+    how large."""
+
+
 class Pipeline:
     """GPU resources and passes for one engine instance (one GPU context)."""
 
@@ -63,7 +72,15 @@ class Pipeline:
         if texture is None or texture[0] != key:
             self._framebuffers = {k: v for k, v in self._framebuffers.items()
                                   if name not in k}
-            self._textures[name] = (key, gpu.types.GPUTexture(size, format=fmt))
+            self._textures.pop(name, None)
+            try:
+                created = gpu.types.GPUTexture(size, format=fmt)
+            except Exception as error:
+                megabytes = size[0] * size[1] * _BYTES_PER_TEXEL.get(fmt, 4) / 2**20
+                raise RenderTargetError(
+                    f"could not allocate the {size[0]}x{size[1]} {name} target "
+                    f"({megabytes:,.0f} MB): {' '.join(str(error).split())}") from None
+            self._textures[name] = (key, created)
         return self._textures[name][1]
 
     def _framebuffer(self, name, depth=None, colors=()):
@@ -143,7 +160,7 @@ class Pipeline:
         bounds = None if bounds_lo_hi is None else \
             (bounds_lo_hi[0].min(axis=0), bounds_lo_hi[1].max(axis=0))
         plan = plan_shadows(snap, bounds)
-        self.warnings.extend(w for w in plan.warnings if w not in self.warnings)
+        self.warnings.extend(w for w in snap.warnings + plan.warnings if w not in self.warnings)
         atlas = self._atlas(plan)
         frame_data = pack_frame(snap, plan)
         frame_ubo = self._frame_ubo(frame_data)
