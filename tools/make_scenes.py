@@ -1,6 +1,6 @@
 """Generate the committed sample data in ``data/``: meshes (glTF) and scene files (JSON).
 
-Owns every file under ``data/gltf/`` and ``data/scenes/``. The output is deterministic:
+Owns every file under ``csm_engine/data/gltf/`` and ``csm_engine/data/scenes/``. The output is deterministic:
 terrain noise comes from an integer hash (no random generator state), floats are
 rounded before they are written, and PNG/JSON are written byte by byte, so running the
 script twice gives identical files.
@@ -471,8 +471,8 @@ def main(argv=None):
     parser.add_argument("--size", type=int, default=DEFAULT_COLUMNS,
                         help=f"landscape columns per side (default {DEFAULT_COLUMNS}; the "
                              "voxel size stays the same, so larger sizes make a larger world)")
-    parser.add_argument("--out", default=os.path.join(REPO_ROOT, "data"),
-                        help="data folder to write into (default: the repository's data/)")
+    parser.add_argument("--out", default=os.path.join(REPO_ROOT, "csm_engine", "data"),
+                        help="data folder to write into (default: csm_engine/data)")
     args = parser.parse_args(argv)
     if args.size < 8:
         parser.error("--size must be at least 8")

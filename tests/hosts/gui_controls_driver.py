@@ -1,7 +1,7 @@
 """Runs inside a real Blender window (``blender --python gui_controls_driver.py -- OUT_DIR``)
 and walks through the CSM controls the way a user would, for ``test_gui_controls.py``.
 
-Owns the in-Blender half of issue 4's GUI acceptance test. The steps run one after another
+Owns the in-Blender half of the GUI controls acceptance test. The steps run one after another
 from a ``bpy.app.timers`` callback; keys and mouse come from ``xdotool`` (real X events
 through the X server, so Blender's own keymap and event handling dispatch them), and the
 driver checks Blender's state on later ticks, once Blender has handled the events:

@@ -1,5 +1,5 @@
 """The CSM controls in a real Blender window: Debian's Blender 3.4 under Xvfb, driven with
-xdotool (issue 4's GUI acceptance test): the add-on enabled in Preferences > Add-ons,
+xdotool (the GUI controls acceptance test): the add-on enabled in Preferences > Add-ons,
 CSM chosen as the render engine in Properties > Render, the default scene imported with
 F3 > "CSM Scene" and the file browser, CSM rendered view picked in the Z pie, N-panel
 "CSM" tab clicked, cascade colours picked in the sidebar's Debug dropdown, F5, the Sun

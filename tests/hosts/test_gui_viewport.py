@@ -1,6 +1,6 @@
 """The CSM viewport in a real Blender window: Debian's Blender 3.4 under Xvfb.
 
-Owns the GUI acceptance test of issue 2: a 3D viewport switched to CSM rendered mode,
+Owns the GUI viewport acceptance test: a 3D viewport switched to CSM rendered mode,
 looking through the scene camera, shows the default scene as CSM renders it with F12.
 ``gui_driver.py`` runs inside Blender and writes a full-window screenshot, the camera
 frame's rectangle in that screenshot and the F12 renders; this file starts the X server

@@ -1,4 +1,4 @@
-"""Undo for every setting change, import and reload (issue 4), on pip bpy 5.0 without a window.
+"""Undo for every setting change, import and reload, on pip bpy 5.0 without a window.
 
 Blender's undo is a memory-file undo of the whole ``bpy.data``: an undo step is pushed when
 an operator with ``{'REGISTER', 'UNDO'}`` finishes or when a property is edited in the UI.
