@@ -58,7 +58,12 @@ def render_final(scene, write_still=False, keep_images=False, profile=False):
     with _requested(request):
         if scene != bpy.context.scene:
             raise ValueError(f"render_final renders the context's scene, not '{scene.name}'")
-        bpy.ops.render.render(write_still=write_still)
+        try:
+            bpy.ops.render.render(write_still=write_still)
+        except RuntimeError:
+            # The operator raises on the engine's own ERROR report, which is in the result.
+            if request.result is None or request.result.error is None:
+                raise
     result = request.result
     if result is None:
         result = RenderResult()

@@ -103,3 +103,58 @@ def test_blender_binary_bridge_on_blender_34(tmp_path):
          os.path.join(REPO, "csm_engine", "blender_cli.py"), "--", "nope.json"],
         capture_output=True, text=True, timeout=300, cwd=tmp_path)
     assert bad.returncode == 3 and "nope.json" in bad.stderr
+
+
+# ----------------------------------------------------------- the file the CLI writes
+def _only_error(result):
+    errors = [line for line in result.stderr.splitlines() if line.startswith("csm: error:")]
+    assert len(errors) == 1 and "Traceback" not in result.stderr, result.stderr
+    return errors[0]
+
+
+def test_writes_exactly_the_named_png_and_nothing_else(tmp_path):
+    shot = tmp_path / "Shot.PNG"                    # any case of .png is PNG
+    result = run_cli([DEFAULT_SCENE, str(shot), "--resolution", "64x36"], cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["Shot.PNG"]
+    assert load_png(str(shot)).shape == (36, 64, 4)
+
+
+@pytest.mark.parametrize("name, words", [
+    ("shot.jpg", ["shot.jpg", "PNG only"]),
+    ("shot", ["shot", "PNG only"]),
+    ("", ["empty"]),
+    ("folder", ["folder", "is a folder"]),
+    ("scene.json", ["scene.json"]),
+])
+def test_a_name_that_is_not_a_new_png_is_refused_before_rendering(tmp_path, name, words):
+    (tmp_path / "folder").mkdir()
+    (tmp_path / "shot.png").write_bytes(b"an unrelated file")
+    scene = tmp_path / "scene.json"
+    shutil.copy(DEFAULT_SCENE, scene)
+    scene.write_text(scene.read_text().replace('"data/', '"' + os.path.join(
+        os.path.dirname(os.path.dirname(DEFAULT_SCENE)), "")))
+    before = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    result = run_cli([str(scene), name, "--resolution", "32x18"], cwd=tmp_path)
+    assert result.returncode == 2, result.stderr
+    error = _only_error(result)
+    for word in words:
+        assert word in error, (word, error)
+    after = {p.name: p.read_bytes() for p in tmp_path.iterdir() if p.is_file()}
+    assert after == before, "nothing written, nothing replaced"
+    assert not (tmp_path.parent / (tmp_path.name + ".png")).exists()
+
+
+def test_a_leading_double_slash_is_the_root_not_the_blend_folder(tmp_path):
+    shot = tmp_path / "x.png"
+    result = run_cli([DEFAULT_SCENE, "/" + str(shot), "--resolution", "32x18"], cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    assert shot.is_file()
+
+
+def test_an_unwritable_folder_is_one_line_and_exit_5(tmp_path):
+    result = run_cli([DEFAULT_SCENE, "/proc/csm_shot.png", "--resolution", "32x18"],
+                     cwd=tmp_path)
+    assert result.returncode == 5, result.stderr
+    error = _only_error(result)
+    assert "/proc/csm_shot.png" in error
