@@ -123,6 +123,12 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         for warning in request.result.warnings:
             self.report({'WARNING'}, "CSM: " + warning)
 
+    def _stats(self, text):
+        # In background mode Blender prints every stats line ("Fra:1 Mem:..."); there the
+        # terminal is the user's and the command line says what happened itself.
+        if not bpy.app.background:
+            self.update_stats("CSM", text)
+
     def _render(self, depsgraph, request):
         scene = depsgraph.scene
         scale = scene.render.resolution_percentage / 100.0
@@ -131,7 +137,7 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         camera = snapshot.camera_from_scene(scene, depsgraph, width, height)
         if camera is None:
             return RenderResult(error="the scene has no camera: add one or set Scene > Camera")
-        self.update_stats("CSM", "Reading scene")
+        self._stats("Reading scene")
         start = time.perf_counter()
         snap = snapshot.take(depsgraph, camera)
         scene_read = time.perf_counter() - start
@@ -141,8 +147,7 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         snap.mesh_sources = {}
         mesh_upload = time.perf_counter() - start - scene_read
         self.update_progress(0.3)
-        self.update_stats("CSM", f"Drawing {sum(m.triangle_count for m in cache.meshes.values())}"
-                                 " triangles")
+        self._stats(f"Drawing {sum(m.triangle_count for m in cache.meshes.values())} triangles")
         renderer = pipeline.Pipeline(textures=_FINAL_RENDER_TEXTURES)
         renderer.profile = request.profile
         result = renderer.render_offscreen(

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..core.camera import CameraView
 from ..core.frame import FrameSnapshot, MeshInstance, PointLight, SpotLight, Sun
+from ..core.frame_layout import MAX_POINT_LIGHTS, MAX_SPOT_LIGHTS
 
 # Blender point/spot power is in watts; CSM's Blinn-Phong treats power / 100 W as the light's
 # intensity multiplier, so an imported course light (colour c, 100 W) shines with exactly c.
@@ -136,6 +137,11 @@ def take(depsgraph, camera, is_viewport=False):
             key = obj.original.name if obj.original else obj.name
             snap.instances.append(MeshInstance(key, _matrix(instance.matrix_world)))
             snap.mesh_sources.setdefault(key, obj)
+    for kind, lights, limit in (("point", snap.points, MAX_POINT_LIGHTS),
+                                ("spot", snap.spots, MAX_SPOT_LIGHTS)):
+        if len(lights) > limit:
+            warnings.append(f"{len(lights)} {kind} lights: CSM draws {limit}, "
+                            f"{len(lights) - limit} are left out")
     return snap
 
 

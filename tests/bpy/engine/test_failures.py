@@ -95,3 +95,11 @@ def test_render_targets_that_cannot_be_allocated_are_named(box_on_ground, monkey
     message = str(failure.value)
     assert "16384x16384" in message and "albedo" in message and "2,048 MB" in message
     assert engine.failure_message(failure.value) == message
+
+
+def test_more_point_lights_than_the_shader_draws_are_counted_in_a_warning(box_on_ground):
+    for index in range(70):
+        bpy.ops.object.light_add(type='POINT', location=(index % 10 - 5, index // 10 - 3, 3))
+    result = render_result(box_on_ground, 64, 48)
+    assert any("70 point lights" in w and "6 are left out" in w for w in result.warnings), \
+        result.warnings
