@@ -98,7 +98,7 @@ def plan_shadows(snap, bounds):
                 scene_bounds=bounds if s.occluder_margin_auto else None)
             try:
                 result = cascades.compute_cascades(
-                    camera.world_from_view, camera.clip_from_view, -snap.sun.to_light,
+                    camera.world_from_view, camera.projection, -snap.sun.to_light,
                     **arguments)
             except ValueError as error:
                 # An impossible setting (e.g. manual splits that do not increase): say which
@@ -106,7 +106,7 @@ def plan_shadows(snap, bounds):
                 warnings.append(f"{error}; using hybrid splits instead")
                 arguments.update(scheme="HYBRID", manual=None)
                 result = cascades.compute_cascades(
-                    camera.world_from_view, camera.clip_from_view, -snap.sun.to_light,
+                    camera.world_from_view, camera.projection, -snap.sun.to_light,
                     **arguments)
             warnings.extend(result.notes)
             if s.freeze_cascades:
@@ -238,26 +238,3 @@ def front_to_back(snap, bounds_lo_hi):
         return range(len(snap.instances))
     centres = 0.5 * (bounds_lo_hi[0] + bounds_lo_hi[1])
     return np.argsort(centres @ np.asarray(snap.camera.forward, dtype=np.float64))
-
-
-def world_positions(camera, view_depth):
-    """(H, W, 3) world positions of pixel centres at the given view depths: the same
-    reconstruction as ``world_position_at`` in lighting_frag.glsl, in float64."""
-    height, width = view_depth.shape
-    x = (np.arange(width) + 0.5) / width * 2.0 - 1.0
-    y = (np.arange(height) + 0.5) / height * 2.0 - 1.0
-    ndc = np.stack(np.broadcast_arrays(x[None, :], y[:, None]), axis=-1)     # (H, W, 2)
-    world_from_clip = np.linalg.inv(camera.clip_from_world)
-    points = []
-    for z in (-1.0, 1.0):
-        clip = np.concatenate([ndc, np.full(ndc.shape[:2] + (1,), z),
-                               np.ones(ndc.shape[:2] + (1,))], axis=-1)
-        world = clip @ world_from_clip.T
-        points.append(world[..., :3] / world[..., 3:])
-    position = np.asarray(camera.position, dtype=np.float64)
-    forward = np.asarray(camera.forward, dtype=np.float64)
-    near_depth = (points[0] - position) @ forward
-    far_depth = (points[1] - position) @ forward
-    t = (view_depth - near_depth) / (far_depth - near_depth)
-    return points[0] + (points[1] - points[0]) * t[..., None]
-
