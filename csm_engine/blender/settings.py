@@ -16,34 +16,49 @@ import bpy
 from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorProperty,
                        IntProperty, PointerProperty)
 
-SPLIT_SCHEMES = (
-    ('UNIFORM', "Uniform", "Equal slices of view depth: sharp far away, blurry near the camera"),
-    ('LOG', "Logarithmic", "Slices grow geometrically with depth: even texel density on screen, "
+from ..core import frame_layout
+
+SPLIT_SCHEMES_LABELS = {
+    'UNIFORM': ("Uniform", "Equal slices of view depth: sharp far away, blurry near the camera"),
+    'LOG': ("Logarithmic", "Slices grow geometrically with depth: even texel density on screen, "
                            "but the first slice is very thin"),
-    ('HYBRID', "Hybrid", "Blend of logarithmic and uniform by Lambda "
+    'HYBRID': ("Hybrid", "Blend of logarithmic and uniform by Lambda "
                          "(z_i = L*n*(f/n)^(i/N) + (1-L)*(n + i/N*(f-n)))"),
-    ('MANUAL', "Manual", "Split positions typed in as fractions of the shadow distance"),
-)
+    'MANUAL': ("Manual", "Split positions typed in as fractions of the shadow distance"),
+}
 
-PCF_PATTERNS = (
-    ('GRID', "Grid", "Square kernel of (2r+1)x(2r+1) taps; radius 0 is a single tap"),
-    ('CROSS5', "5-tap cross", "Centre and 4 neighbours one texel away, scaled by the radius"),
-    ('NINE_TAP', "9-tap", "Centre, 4 edges and 4 corners, scaled by the radius"),
-)
+PCF_PATTERNS_LABELS = {
+    'GRID': ("Grid", "Square kernel of (2r+1)x(2r+1) taps; radius 0 is a single tap"),
+    'CROSS5': ("5-tap cross", "Centre and 4 neighbours one texel away, scaled by the radius"),
+    'NINE_TAP': ("9-tap", "Centre, 4 edges and 4 corners, scaled by the radius"),
+}
 
-DEBUG_VIEWS = (
-    ('NONE', "Lit", "The normal lit image"),
-    ('CASCADES', "Cascade colours", "Tint by cascade: red nearest, green, blue, yellow farthest"),
-    ('SHADOW_FACTOR', "Shadow factor", "Sun visibility only: white lit, black shadowed"),
-    ('SHADOW_MAP', "Shadow map", "Linearized depth of one shadow map"),
-    ('TEXEL_DENSITY', "Texel density", "Shadow-map texels per screen pixel as a heat map: "
+DEBUG_VIEWS_LABELS = {
+    'NONE': ("Lit", "The normal lit image"),
+    'CASCADES': ("Cascade colours", "Tint by cascade: red nearest, green, blue, yellow farthest"),
+    'SHADOW_FACTOR': ("Shadow factor", "Sun visibility only: white lit, black shadowed"),
+    'SHADOW_MAP': ("Shadow map", "Linearized depth of one shadow map"),
+    'TEXEL_DENSITY': ("Texel density", "Shadow-map texels per screen pixel as a heat map: "
                                        "blue = wasted resolution, red = too few texels"),
-    ('ALBEDO', "G-buffer: albedo", "Base colour channel of the G-buffer"),
-    ('NORMAL', "G-buffer: normal", "World-space normals mapped to 0..1"),
-    ('POSITION', "G-buffer: position", "World position in repeating bands 1/20 of the shadow distance wide"),
-    ('DEPTH', "G-buffer: depth", "View depth, normalised to the shadow distance"),
-    ('SPECULAR', "G-buffer: specular", "Specular strength (red) and shininess / 256 (green)"),
-)
+    'ALBEDO': ("G-buffer: albedo", "Base colour channel of the G-buffer"),
+    'NORMAL': ("G-buffer: normal", "World-space normals mapped to 0..1"),
+    'POSITION': ("G-buffer: position", "World position in repeating bands 1/20 of the shadow distance wide"),
+    'DEPTH': ("G-buffer: depth", "View depth, normalised to the shadow distance"),
+    'SPECULAR': ("G-buffer: specular", "Specular strength (red) and shininess / 256 (green)"),
+}
+
+
+def _enum_items(identifiers, labels):
+    """EnumProperty items in core's order (core owns the identifiers, and the GLSL values
+    are their positions); here only their labels and tooltips."""
+    if set(identifiers) != set(labels):
+        raise RuntimeError(f"settings labels {sorted(labels)} do not match {identifiers}")
+    return tuple((identifier, *labels[identifier]) for identifier in identifiers)
+
+
+SPLIT_SCHEMES = _enum_items(frame_layout.SPLIT_SCHEMES, SPLIT_SCHEMES_LABELS)
+PCF_PATTERNS = _enum_items(frame_layout.PCF_PATTERNS, PCF_PATTERNS_LABELS)
+DEBUG_VIEWS = _enum_items(frame_layout.DEBUG_VIEWS, DEBUG_VIEWS_LABELS)
 
 # Spelled out so the CLI's --set can report the valid choices.
 ENUM_ITEMS = {

@@ -40,9 +40,8 @@ import numpy as np
 
 from .camera import CameraProjection, as_projection
 from .checks import finite, matrix4, vector3
+from .frame_layout import MAX_CASCADES, SPLIT_SCHEMES
 
-SPLIT_SCHEMES = ("UNIFORM", "LOG", "HYBRID", "MANUAL")
-MAX_CASCADES = 4
 MIN_CASCADE_RESOLUTION = 64          # texels; halving stops here (see cascade_resolutions)
 
 

@@ -211,14 +211,14 @@ def test_enum_values_are_their_positions():
 
 
 def _settings_identifiers(name):
-    """First elements of a literal items tuple in blender/settings.py (read, not imported:
-    it needs bpy)."""
+    """Identifiers that blender/settings.py labels for an enum, in order (its literal
+    ``<NAME>_LABELS`` dict; read, not imported: it needs bpy)."""
     tree = ast.parse((PACKAGE / "blender" / "settings.py").read_text(encoding="utf-8"))
     for node in tree.body:
-        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == name
+        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == name + "_LABELS"
                                                 for t in node.targets):
-            return tuple(item[0] for item in ast.literal_eval(node.value))
-    raise AssertionError(f"settings.py has no {name}")
+            return tuple(ast.literal_eval(node.value))
+    raise AssertionError(f"settings.py has no {name}_LABELS")
 
 
 @pytest.mark.parametrize("name", ["DEBUG_VIEWS", "PCF_PATTERNS", "SPLIT_SCHEMES"])
