@@ -33,7 +33,7 @@ PROGRAMS = {
         vertex="gbuffer_vert.glsl", fragment="gbuffer_frag.glsl",
         inputs=(("pos", "VEC3"), ("nor", "VEC3"), ("uv", "VEC2")),
         interface=(("world_normal", "VEC3", "smooth"), ("tex_coord", "VEC2", "smooth"),
-                   ("view_depth", "FLOAT", "smooth")),
+                   ("view_depth", "FLOAT", "smooth"), ("mirror_sign", "FLOAT", "flat")),
         push=(("MAT4", "world_from_object"), ("VEC4", "base_color"),
               ("VEC4", "material_params")),   # shininess, specular, alpha cutoff, has texture
         samplers=(("FLOAT_2D", "base_color_texture"),),

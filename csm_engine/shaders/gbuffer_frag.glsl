@@ -17,7 +17,7 @@ void main()
 #endif
   vec3 n = normalize(world_normal);
   /* Blender draws faces from both sides; light the side the camera sees. */
-  if (!gl_FrontFacing) {
+  if (gl_FrontFacing != (mirror_sign > 0.0)) {
     n = -n;
   }
   out_albedo = vec4(base.rgb, material_params.y);

@@ -5,6 +5,9 @@ void main()
   /* Inverse transpose keeps normals perpendicular under non-uniform scale (pillars are
    * scaled (1,3,1) in the course's shadow test). */
   world_normal = transpose(inverse(mat3(world_from_object))) * nor;
+  /* A mirrored object (negative scale) turns its triangles' winding around, so
+   * gl_FrontFacing says "back" for the faces the camera sees; the fragment stage undoes it. */
+  mirror_sign = determinant(mat3(world_from_object)) < 0.0 ? -1.0 : 1.0;
   tex_coord = uv;
   /* Linear in the world position, so interpolation gives the exact per-pixel value; the
    * lighting pass rebuilds the world position from it (4 bytes a pixel instead of 16). */

@@ -3,6 +3,7 @@ import resource
 
 import bpy
 import numpy as np
+import pytest
 
 from tests.bpy.bpy_helpers import render_scene
 from tests.bpy.engine.test_shadows import add_box, add_camera, add_ground, add_sun
@@ -197,3 +198,26 @@ def test_no_leak_over_500_renders(empty_scene):
         bpy.ops.render.render()
     grown_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before) / 1024
     assert grown_mb < 40, f"peak memory grew {grown_mb:.0f} MB over 500 renders"
+
+
+@pytest.mark.parametrize("how", ["negative scale", "mirror modifier"])
+def test_a_mirrored_object_is_lit_like_its_original(empty_scene, how):
+    """Two boxes side by side, one an unmirrored original and one mirrored (negative X
+    scale, or Blender's Mirror modifier applied on an object that is itself mirrored): the
+    sunlit tops and sides of both show the same brightness, not ambient only."""
+    scene = empty_scene
+    set_world_color(scene, (0.02, 0.02, 0.02))
+    add_sun((0.3, 0.5, -1.0))
+    original = add_box((-2, 0, 1), (1, 1, 1))
+    mirrored = add_box((2, 0, 1), (1, 1, 1))
+    if how == "negative scale":
+        mirrored.scale = (-1, 1, 1)
+    else:
+        mirrored.scale = (1, -1, 1)
+        mirrored.modifiers.new("mirror", 'MIRROR')
+    _top_camera(scene, height=20.0, ortho_scale=10.0)
+    color = render_scene(scene, 200, 200)["combined"][..., :3].mean(axis=-1)
+    left, right = color[90:110, 50:70], color[90:110, 130:150]     # the two box tops
+    assert left.mean() > 0.3, f"the original's top is sunlit ({left.mean():.3f})"
+    assert abs(right.mean() - left.mean()) < 0.02 * left.mean() + 0.005, \
+        (left.mean(), right.mean())
