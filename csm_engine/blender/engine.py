@@ -11,6 +11,7 @@ Blender frees the instance.
 itself, so the request travels to ``render()`` for the duration of that one call.
 """
 
+import atexit
 import contextlib
 import time
 
@@ -293,7 +294,16 @@ def _compatible_panels():
             yield panel
 
 
+def release_gpu_resources():
+    """Free the GPU objects kept between renders (final-render targets, compiled shaders).
+    Called when the add-on is disabled and when Python exits: Blender counts anything still
+    alive then as leaked and prints "Not freed memory blocks" at exit."""
+    _FINAL_RENDER_TEXTURES.clear()
+    shaders.LIBRARY.release()
+
+
 def register():
+    atexit.register(release_gpu_resources)
     bpy.utils.register_class(CSMRenderEngine)
     for panel in _compatible_panels():
         panel.COMPAT_ENGINES.add("CSM")
@@ -303,3 +313,5 @@ def unregister():
     for panel in _compatible_panels():
         panel.COMPAT_ENGINES.discard("CSM")
     bpy.utils.unregister_class(CSMRenderEngine)
+    release_gpu_resources()
+    atexit.unregister(release_gpu_resources)

@@ -100,6 +100,10 @@ def _expand_includes(name, directory, file_ids, depth=0):
             text = handle.read()
     except OSError as error:
         raise ShaderCompileError(f"{path}: cannot read shader ({error.strerror})") from None
+    except UnicodeDecodeError as error:
+        line = error.object[:error.start].count(b"\n") + 1
+        raise ShaderCompileError(f"{name}:{line}: not UTF-8 text (byte 0x{error.object[error.start]:02x}); "
+                                 "save the file as UTF-8") from None
     file_id = file_ids.setdefault(name, len(file_ids) + 1)
     base = file_id * LINES_PER_FILE
     out = [f"#line {base + 1}"]
@@ -250,6 +254,10 @@ class ShaderLibrary:
             self._shaders = self._compile_all()
             self.generation += 1
         return self._shaders[name]
+
+    def release(self):
+        """Drop the compiled programs (they compile again on the next ``get``)."""
+        self._shaders = None
 
     def reload(self):
         """Recompile every program from disk. Returns None on success, else the message."""

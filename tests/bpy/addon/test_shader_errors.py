@@ -46,3 +46,18 @@ def test_compile_error_names_file_and_line(empty_scene, tmp_path, name, broken):
     assert message and re.search(rf"(?<![\w.]){re.escape(name)}:{line}(?!\d)", message), \
         (line, message)
     assert library.last_error == message
+
+
+def test_a_shader_file_that_is_not_utf8_is_a_clean_error(empty_scene, tmp_path):
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    empty_scene.collection.objects.link(camera)
+    empty_scene.camera = camera
+    render_scene(empty_scene, 16, 16)
+    directory = tmp_path / "shaders"
+    shutil.copytree(paths.shaders_dir(), directory)
+    path = directory / "common.glsl"
+    path.write_bytes(path.read_bytes().replace(b"/*", b"/* caf\xe9 ", 1))
+    library = shaders.ShaderLibrary(directory=str(directory))
+    message = library.reload()
+    assert message == "common.glsl:1: not UTF-8 text (byte 0xe9); save the file as UTF-8", \
+        message
