@@ -253,11 +253,17 @@ def draw_message(width, height, text):
         else:
             line = candidate
     lines.append(line)
-    y = height - 40
-    for line in lines:
-        blf.position(font, 20, y, 0)
-        blf.draw(font, line)
-        y -= int(size * 1.6)
+    from mathutils import Matrix
+    pixel_space = Matrix(((2.0 / width, 0, 0, -1), (0, 2.0 / height, 0, -1), (0, 0, -1, 0),
+                          (0, 0, 0, 1)))
+    with gpu.matrix.push_pop(), gpu.matrix.push_pop_projection():
+        gpu.matrix.load_identity()
+        gpu.matrix.load_projection_matrix(pixel_space)
+        y = height - 40
+        for line in lines:
+            blf.position(font, 20, y, 0)
+            blf.draw(font, line)
+            y -= int(size * 1.6)
 
 
 def apply_depsgraph_updates(cache, updates):

@@ -103,3 +103,21 @@ def test_more_point_lights_than_the_shader_draws_are_counted_in_a_warning(box_on
     result = render_result(box_on_ground, 64, 48)
     assert any("70 point lights" in w and "6 are left out" in w for w in result.warnings), \
         result.warnings
+
+
+def test_the_viewport_message_is_drawn_over_a_cleared_frame(box_on_ground):
+    import gpu
+    render_result(box_on_ground, 16, 16)       # a GPU context exists after a render
+    offscreen = gpu.types.GPUOffScreen(320, 80)
+    with offscreen.bind():
+        framebuffer = gpu.state.active_framebuffer_get()
+        framebuffer.clear(color=(1.0, 1.0, 1.0, 1.0))
+        engine.draw_message(320, 80, "CSM cannot draw this view: something is wrong " * 3)
+        pixels = np.array(framebuffer.read_color(0, 0, 320, 80, 4, 0, 'FLOAT').to_list())
+    offscreen.free()
+    rgb = pixels.reshape(80, 320, 4)[..., :3]
+    background = np.all(np.abs(rgb - 0.12) < 0.02, axis=-1)
+    text = (rgb[..., 0] > 0.5) & (rgb[..., 2] < rgb[..., 0])
+    assert background.mean() > 0.6, "the old frame is cleared to dark grey"
+    assert text.sum() > 100, "the reason is written in red"
+    assert text[:, 160:].any(), "long messages wrap instead of running off the right"
