@@ -24,6 +24,7 @@ How each number is taken:
 """
 
 import argparse
+import dataclasses
 import json
 import math
 import os
@@ -156,7 +157,6 @@ def viewport_cost(scene, width, height, redraws):
     import gpu
     import numpy as np
     from csm_engine.blender import engine, mesh_cache, snapshot
-    from csm_engine.core.camera import CameraView
     from csm_engine.render import gpu_mesh, pipeline
 
     cache = mesh_cache.MeshCache()
@@ -205,8 +205,7 @@ def viewport_cost(scene, width, height, redraws):
             turn = np.array(turn)
             orbit[:3, :3] = turn @ rotation
             orbit[:3, 3] = turn @ orbit[:3, 3]
-            camera = CameraView(orbit, base.clip_from_view, base.is_perspective,
-                                base.clip_start, base.clip_end, width, height)
+            camera = dataclasses.replace(base, world_from_view=orbit)
             sub, f = redraw(camera)
             python, _ = redraw(camera, python_only=True)
             python_s.append(python)
