@@ -300,16 +300,21 @@ def _compatible_panels():
             yield panel
 
 
-def release_gpu_resources():
+def release_gpu_resources(exiting=True):
     """Free the GPU objects kept between renders (final-render targets, compiled shaders).
     Called when the add-on is disabled and when Python exits: Blender counts anything still
     alive then as leaked and prints "Not freed memory blocks" at exit."""
     _FINAL_RENDER_TEXTURES.clear()
     shaders.LIBRARY.release()
+    if exiting:
+        shaders.release_retired()    # nothing draws after this; see the NOTE in shaders.py
+
+
+# Registered once per process, whatever register/unregister do in between.
+atexit.register(release_gpu_resources)
 
 
 def register():
-    atexit.register(release_gpu_resources)
     bpy.utils.register_class(CSMRenderEngine)
     for panel in _compatible_panels():
         panel.COMPAT_ENGINES.add("CSM")
@@ -319,5 +324,4 @@ def unregister():
     for panel in _compatible_panels():
         panel.COMPAT_ENGINES.discard("CSM")
     bpy.utils.unregister_class(CSMRenderEngine)
-    release_gpu_resources()
-    atexit.unregister(release_gpu_resources)
+    release_gpu_resources(exiting=False)

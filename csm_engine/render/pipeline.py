@@ -148,6 +148,9 @@ class Pipeline:
     def draw(self, snap, cache, target_fb=None, width=None, height=None):
         """Render one frame into ``target_fb`` (None: the currently bound framebuffer)."""
         import gpu
+        # Programs replaced by F5 or dropped with a library are freed here, in the context
+        # that draws, never where they were retired (see the NOTE in shaders.py).
+        shaders.release_retired()
         library = shaders.LIBRARY
         width = width or snap.camera.width
         height = height or snap.camera.height

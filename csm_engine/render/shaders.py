@@ -236,6 +236,24 @@ def _build(program_name, spec, directory):
     return shader
 
 
+# NOTE: a GPU program must not be freed while a GPU context other than the one that drew
+# with it is current. F5 (``reload``) runs outside any render, with Blender's own context
+# current, and a library can be dropped there too. Freeing programs at that moment made Mesa
+# (llvmpipe) delete their compiled variants from the wrong context and left the render
+# context's state broken: its next draw ran with no vertex shader and the process segfaulted
+# (pip bpy 5.0.1 runs every final render in one long-lived context; see
+# tests/bpy/engine/test_render.py). So a library never frees a program itself: programs it
+# stops using wait here until ``release_retired``, which ``Pipeline.draw`` calls inside the
+# context that draws.
+_RETIRED = []
+
+
+def release_retired():
+    """Free the programs retired since the last call. Call it only where a frame is drawn
+    (``Pipeline.draw``), never from an operator or at module level."""
+    _RETIRED.clear()
+
+
 class ShaderLibrary:
     """All programs, compiled lazily together; reload keeps the last good set on error."""
 
@@ -245,9 +263,24 @@ class ShaderLibrary:
         self.last_error = None
         self.generation = 0
 
+    def __del__(self):
+        # A library that goes away (e.g. a temporary one in tests) frees nothing itself.
+        try:
+            if self._shaders:
+                _RETIRED.append(self._shaders)
+        except (AttributeError, TypeError):   # interpreter shutdown
+            pass
+
     def _compile_all(self):
         directory = self.directory or paths.shaders_dir()
-        return {name: _build(name, spec, directory) for name, spec in PROGRAMS.items()}
+        compiled = {}
+        try:
+            for name, spec in PROGRAMS.items():
+                compiled[name] = _build(name, spec, directory)
+        except BaseException:
+            _RETIRED.append(compiled)      # the programs that did compile, freed later
+            raise
+        return compiled
 
     def get(self, name):
         if self._shaders is None:
@@ -256,7 +289,10 @@ class ShaderLibrary:
         return self._shaders[name]
 
     def release(self):
-        """Drop the compiled programs (they compile again on the next ``get``)."""
+        """Drop the compiled programs (they compile again on the next ``get``); like every
+        program this library stops using, they are freed by ``release_retired``."""
+        if self._shaders:
+            _RETIRED.append(self._shaders)
         self._shaders = None
 
     def reload(self):
@@ -267,6 +303,8 @@ class ShaderLibrary:
             self.last_error = str(error)
             print(f"CSM: {self.last_error} (keeping the previous shaders)", file=sys.stderr)
             return self.last_error
+        if self._shaders:
+            _RETIRED.append(self._shaders)   # freed by the next draw, not here (see NOTE)
         self._shaders = shaders
         self.last_error = None
         self.generation += 1

@@ -221,3 +221,34 @@ def test_a_mirrored_object_is_lit_like_its_original(empty_scene, how):
     assert left.mean() > 0.3, f"the original's top is sunlit ({left.mean():.3f})"
     assert abs(right.mean() - left.mean()) < 0.02 * left.mean() + 0.005, \
         (left.mean(), right.mean())
+
+
+def test_programs_dropped_outside_a_render_do_not_break_the_next_one(empty_scene, monkeypatch):
+    """Regression: a shader library dropped (or replaced by F5) outside any render freed its
+    GPU programs with Blender's own context current; the render context then ran its next
+    full-screen draw with no vertex shader and the process segfaulted in llvmpipe (pip bpy
+    5.0.1). Programs are now freed by the next draw, inside the render context."""
+    import gc
+    from csm_engine.core import paths
+    from csm_engine.render import shaders
+
+    for _ in range(3):
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        scene = bpy.context.scene
+        scene.render.engine = "CSM"
+        add_ground(4)
+        add_sun((0.5, 0.3, -1))
+        add_camera(scene, (0, -6, 4), (0, 0, 0))
+        temporary = shaders.ShaderLibrary(directory=paths.shaders_dir())
+        monkeypatch.setattr(shaders, "LIBRARY", temporary)
+        render_scene(scene, 48, 32)              # the temporary programs draw in the render
+        monkeypatch.undo()
+        render_scene(scene, 16, 16)              # ... then the shared ones do
+        del temporary
+        gc.collect()                             # dropped outside any render
+        bpy.ops.wm.read_factory_settings(use_empty=True)
+        scene = bpy.context.scene
+        scene.render.engine = "CSM"
+        add_camera(scene, (0, -6, 4), (0, 0, 0))
+        image = render_scene(scene, 16, 16)["combined"]   # one full-screen lighting draw
+        assert np.isfinite(image).all()
