@@ -1,7 +1,10 @@
 """Render the pictures in docs/images/ (the README's default scene, every debug view, the
-split schemes side by side). Run on pip bpy from the repository root:
+split schemes side by side). Run on pip bpy (after ./dev setup), from any folder:
 
     .venv/bin/python tools/make_docs_images.py [--resolution 960x540]
+
+The session is set up by ``cli.open_scene`` as for ``./dev render``: the same bundled scene,
+size and Standard view transform.
 """
 import argparse
 import os
@@ -20,14 +23,19 @@ SCHEMES = (("UNIFORM", {}), ("LOG", {}), ("HYBRID", {}),
 
 
 def render(scene, path, **settings):
-    import bpy
+    """Render ``scene`` with CSM ``settings`` changed for this one picture; write ``path``."""
+    from csm_engine.blender import engine
     saved = {name: getattr(scene.csm, name) for name in settings}
     for name, value in settings.items():
         setattr(scene.csm, name, value)
     scene.render.filepath = path
-    bpy.ops.render.render(write_still=True)
-    for name, value in saved.items():
-        setattr(scene.csm, name, value)
+    try:
+        result = engine.render_final(scene, write_still=True)
+    finally:
+        for name, value in saved.items():
+            setattr(scene.csm, name, value)
+    if result.error:
+        sys.exit(f"make_docs_images: {os.path.basename(path)}: render failed: {result.error}")
     print("wrote", os.path.relpath(path, REPO))
 
 
@@ -53,21 +61,17 @@ def side_by_side(paths, out):
 
 
 def main():
-    parser = argparse.ArgumentParser(description=__doc__)
-    parser.add_argument("--resolution", default="960x540")
+    parser = argparse.ArgumentParser(description=__doc__,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--resolution", default="960x540", metavar="WxH")
     args = parser.parse_args()
-    width, height = (int(v) for v in args.resolution.split("x"))
-    import bpy
-    from csm_engine import cli, paths, scene_builder
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    cli.ensure_registered()
-    scene = bpy.context.scene
-    scene_builder.import_scene_file(paths.default_scene_path(), scene)
+    from csm_engine.blender import cli
+    try:
+        scene = cli.open_scene("default", resolution=cli.parse_resolution(args.resolution))
+    except cli.CLIError as error:
+        sys.exit(f"make_docs_images: error: {error}")
     scene.render.engine = "CSM"
-    scene.render.resolution_x, scene.render.resolution_y = width, height
-    scene.render.resolution_percentage = 100
     scene.render.image_settings.file_format = 'PNG'
-    scene.view_settings.view_transform = 'Standard'
     os.makedirs(OUT, exist_ok=True)
 
     render(scene, os.path.join(OUT, "default_scene.png"))
