@@ -17,13 +17,13 @@ import json
 import math
 import os
 import re
-import struct
 import sys
-import zlib
 
 import numpy as np
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, os.path.join(REPO_ROOT, "tools"))
+from csm_tools.report_io import png_bytes  # noqa: E402  (the one PNG writer)
 
 # The course's vokselia.gltf is about +-1.93 wide in x and z and 0..0.66 high: 88 columns
 # of 0.0439-unit voxels span 3.86, and 15 layers reach 0.658.
@@ -217,19 +217,7 @@ def _palette_png():
             factor = 0.86 + 0.06 * shade   # subtle per-voxel variation
             value = np.clip(np.round(np.array(colour) * factor), 0, 255).astype(np.uint8)
             image[shade * BLOCK:(shade + 1) * BLOCK, index * BLOCK:(index + 1) * BLOCK] = value
-    return _png_bytes(image)
-
-
-def _png_bytes(image):
-    height, width, _ = image.shape
-    raw = b"".join(b"\x00" + image[row].tobytes() for row in range(height))
-
-    def chunk(kind, data):
-        return (struct.pack(">I", len(data)) + kind + data
-                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
-    header = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
-    return (b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header)
-            + chunk(b"IDAT", zlib.compress(raw, 9)) + chunk(b"IEND", b""))
+    return png_bytes(image)
 
 
 # ------------------------------------------------------------------------ glTF

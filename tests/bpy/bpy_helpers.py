@@ -23,14 +23,16 @@ def render_scene(scene, width=320, height=240):
     return render_result(scene, width, height).images
 
 
-def read_png(path):
-    """An 8-bit PNG as a (H, W, 3) uint8 array, top row first, read through Blender."""
+def load_png(path):
+    """A PNG as Blender reads it: float32 (H, W, channels) in 0..1, top row first (Blender
+    gives RGBA for 8-bit files; no colour management is applied to ``pixels``). The
+    numpy-only reader for tools' outputs is ``csm_tools.report_io.read_png``."""
     image = bpy.data.images.load(str(path), check_existing=False)
     try:
         width, height = image.size
-        pixels = np.empty(width * height * image.channels, dtype=np.float32)
+        channels = image.channels
+        pixels = np.empty(width * height * channels, dtype=np.float32)
         image.pixels.foreach_get(pixels)
     finally:
         bpy.data.images.remove(image)
-    rgb = pixels.reshape(height, width, -1)[..., :3]
-    return np.round(rgb * 255.0).astype(np.uint8)[::-1]   # Blender's rows run bottom-up
+    return pixels.reshape(height, width, channels)[::-1]   # Blender's rows run bottom-up

@@ -14,10 +14,8 @@ read or written and each test starts from a clean install.
 import json
 import os
 import shutil
-import struct
 import subprocess
 import sys
-import zlib
 
 import numpy as np
 import pytest
@@ -114,61 +112,11 @@ def run_host(command, env, cwd):
 
 
 def read_png(path):
-    """PNG -> float array (height, width, channels) in 0..1, top row first.
-
-    A small reader for the non-interlaced 8/16-bit PNGs Blender writes, so the tests need
-    no imaging library beyond numpy."""
-    with open(path, "rb") as handle:
-        data = handle.read()
-    assert data[:8] == b"\x89PNG\r\n\x1a\n", f"{path} is not a PNG"
-    offset, chunks, header = 8, [], None
-    while offset < len(data):
-        length, kind = struct.unpack(">I4s", data[offset:offset + 8])
-        body = data[offset + 8:offset + 8 + length]
-        if kind == b"IHDR":
-            header = struct.unpack(">IIBBBBB", body)
-        elif kind == b"IDAT":
-            chunks.append(body)
-        offset += 12 + length
-    width, height, depth, color_type, _, _, interlace = header
-    assert interlace == 0 and depth in (8, 16), f"{path}: unsupported PNG (depth {depth})"
-    channels = {0: 1, 2: 3, 4: 2, 6: 4}[color_type]
-    bytes_per_pixel = channels * depth // 8
-    stride = width * bytes_per_pixel
-    raw = np.frombuffer(zlib.decompress(b"".join(chunks)), np.uint8).reshape(height, stride + 1)
-    rows = np.zeros((height, stride), np.int32)
-    previous = np.zeros(stride, np.int32)
-    for y in range(height):
-        kind, line = raw[y, 0], raw[y, 1:].astype(np.int32)
-        if kind == 0:
-            row = line
-        elif kind == 2:
-            row = (line + previous) & 0xFF
-        else:
-            # Sub, Average and Paeth depend on the pixel to the left: one pass per byte group.
-            row = np.zeros(stride, np.int32)
-            for x in range(stride):
-                left = row[x - bytes_per_pixel] if x >= bytes_per_pixel else 0
-                up = previous[x]
-                up_left = previous[x - bytes_per_pixel] if x >= bytes_per_pixel else 0
-                if kind == 1:
-                    predictor = left
-                elif kind == 3:
-                    predictor = (left + up) // 2
-                else:
-                    p = left + up - up_left
-                    pa, pb, pc = abs(p - left), abs(p - up), abs(p - up_left)
-                    predictor = left if pa <= pb and pa <= pc else (up if pb <= pc else up_left)
-                row[x] = (line[x] + predictor) & 0xFF
-        rows[y] = row
-        previous = row
-    samples = rows.astype(np.uint8)
-    if depth == 16:
-        samples = samples.reshape(height, -1, 2)
-        values = (samples[..., 0].astype(np.float64) * 256 + samples[..., 1]) / 65535.0
-    else:
-        values = samples.astype(np.float64) / 255.0
-    return values.reshape(height, width, channels)
+    """PNG -> float array (height, width, channels) in 0..1, top row first (the one PNG
+    reader, ``csm_tools.report_io``, with no imaging library beyond numpy)."""
+    from csm_tools.report_io import read_png as read_png_samples
+    samples = read_png_samples(path)
+    return samples.astype(np.float64) / (65535.0 if samples.dtype == np.uint16 else 255.0)
 
 
 def luminance(image):

@@ -163,18 +163,9 @@ def viewport_run(x_display, hosts, tmp_path_factory):
 
 def load_png(path):
     """PNG -> float32 (height, width, 3) in 0..1, top row first, decoded by pip bpy's image
-    loader (a decoder independent of the Blender that wrote the file). Byte images give
-    their stored values: no colour management is applied to ``pixels``."""
-    import bpy
-    image = bpy.data.images.load(path, check_existing=False)
-    try:
-        width, height = image.size
-        pixels = np.empty(width * height * image.channels, np.float32)
-        image.pixels.foreach_get(pixels)
-        channels = image.channels
-    finally:
-        bpy.data.images.remove(image)
-    return pixels.reshape(height, width, channels)[::-1, :, :3]
+    loader (a decoder independent of the Blender that wrote the file)."""
+    from tests.bpy.bpy_helpers import load_png as load_with_blender
+    return load_with_blender(path)[..., :3]
 
 
 def camera_frame_crop(window_image, frame, size):

@@ -8,10 +8,10 @@ import shutil
 import subprocess
 import sys
 
-import bpy
 import numpy as np
 import pytest
 
+from tests.bpy.bpy_helpers import load_png
 from tests.conftest import REPO
 
 DEFAULT_SCENE = os.path.join(REPO, "csm_engine", "data", "scenes", "default.json")
@@ -21,17 +21,6 @@ def run_cli(args, cwd):
     env = dict(os.environ, PYTHONPATH=REPO)
     return subprocess.run([sys.executable, "-m", "csm_engine", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=300)
-
-
-def load_png(path):
-    image = bpy.data.images.load(path, check_existing=False)
-    try:
-        width, height = image.size
-        pixels = np.empty(width * height * 4, dtype=np.float32)
-        image.pixels.foreach_get(pixels)
-    finally:
-        bpy.data.images.remove(image)
-    return pixels.reshape(height, width, 4)[::-1]
 
 
 def assert_lit_landscape(pixels):

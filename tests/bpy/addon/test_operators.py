@@ -17,7 +17,7 @@ import bpy
 import numpy as np
 import pytest
 
-from tests.bpy.bpy_helpers import render_scene
+from tests.bpy.bpy_helpers import load_png, render_scene
 from tests.conftest import REPO
 from csm_engine.blender import keymap, light_controls, operators, ui
 from csm_engine.core import paths
@@ -282,15 +282,9 @@ def test_screenshot_writes_a_lit_png_of_the_render_size(empty_scene, tmp_path):
     assert empty_scene.render.engine == "BLENDER_WORKBENCH"
     with open(path, "rb") as handle:
         assert handle.read(8) == b"\x89PNG\r\n\x1a\n"
-    image = bpy.data.images.load(str(path))
-    try:
-        assert tuple(image.size) == (64, 40)
-        pixels = np.empty(64 * 40 * 4, dtype=np.float32)
-        image.pixels.foreach_get(pixels)
-        rgb = pixels.reshape(40, 64, 4)[..., :3]
-        assert (rgb.max(axis=-1) > 0.3).mean() > 0.5       # the sunlit plane fills the view
-    finally:
-        bpy.data.images.remove(image)
+    rgb = load_png(path)[..., :3]
+    assert rgb.shape[:2] == (40, 64)
+    assert (rgb.max(axis=-1) > 0.3).mean() > 0.5       # the sunlit plane fills the view
 
 
 def test_screenshot_default_path_is_next_to_the_blend_or_the_current_folder(

@@ -208,7 +208,7 @@ def test_a_mirrored_object_is_lit_like_its_original(empty_scene, how):
     scene = empty_scene
     set_world_color(scene, (0.02, 0.02, 0.02))
     add_sun((0.3, 0.5, -1.0))
-    original = add_box((-2, 0, 1), (1, 1, 1))
+    add_box((-2, 0, 1), (1, 1, 1))                 # the original
     mirrored = add_box((2, 0, 1), (1, 1, 1))
     if how == "negative scale":
         mirrored.scale = (-1, 1, 1)
