@@ -43,6 +43,7 @@ from .report_io import write_png
 SHADOWED_BELOW = 0.5            # visibility under this counts as "in shadow"
 LIT_FRACTION = 1e-3             # compared when off > this x the 99th percentile of off
 DEFAULT_RESOLUTION = "1280x720"
+TRANSPARENT_BOUNCES = 64        # alpha-cut layers a Cycles shadow ray may pass through
 PROG = "./dev ground-truth"
 
 # Heat-map colours (sRGB bytes).
@@ -243,7 +244,10 @@ def _setup_cycles(scene, changes):
     cycles = scene.cycles
     for name, value in (("device", 'CPU'), ("samples", 1), ("use_adaptive_sampling", False),
                         ("use_denoising", False), ("max_bounces", 0),
-                        ("transparent_max_bounces", 0), ("pixel_filter_type", 'BOX'),
+                        # Shadow rays pass through alpha-cut texels (leaves, grilles) as
+                        # CSM's masked shadow pass does; 0 made them solid cards.
+                        ("transparent_max_bounces", TRANSPARENT_BOUNCES),
+                        ("pixel_filter_type", 'BOX'),
                         ("filter_width", 0.01), ("seed", 0), ("use_animated_seed", False),
                         ("sample_clamp_direct", 0.0)):
         changes.set(cycles, name, value)

@@ -189,3 +189,20 @@ def test_module_runs_from_the_command_line(tmp_dir):
     assert done.returncode == 1, done.stdout + done.stderr
     assert "mismatch:" in done.stdout and "false shadow" in done.stdout
     assert "exceeds 1 %" in done.stderr
+
+
+def test_alpha_cut_casters_let_light_through_in_cycles_too(empty_scene):
+    """A leaf card whose right half is alpha-cut: CSM's masked shadow pass lets the sun
+    through the holes, and so must Cycles, or the tool blames CSM for "missed shadow"."""
+    from tests.bpy.engine.test_render import _checker_image, _textured_plane
+    scene = empty_scene
+    bpy.ops.mesh.primitive_plane_add(size=30)
+    _textured_plane(_checker_image("leaf_card", alpha_holes=True), cutoff=0.5,
+                    location=(0, 0, 2.0), size=6.0)
+    bpy.ops.object.light_add(type='SUN', rotation=(np.radians(20), 0.0, np.radians(10)))
+    bpy.ops.object.camera_add(location=(0.0, -14.0, 12.0), rotation=(np.radians(50), 0, 0))
+    scene.camera = bpy.context.object
+    result = ground_truth.measure(scene, 240, 135)
+    assert result.cycles_shadowed_pixels > 200, result.summary()
+    assert result.missed_shadow_percent < 2.0, result.summary()
+    assert result.mismatch_percent < 3.0, result.summary()
