@@ -227,8 +227,8 @@ def sun_travel():
 def camera_state():
     camera = bpy.context.scene.camera
     matrix = camera.matrix_world
-    from csm_engine.blender import operators
-    yaw, pitch = operators.yaw_pitch(matrix)
+    from csm_engine.core import controls
+    yaw, pitch = controls.yaw_pitch(matrix)
     return {"name": camera.name, "location": [float(v) for v in matrix.translation],
             "forward": [float(-matrix[i][2]) for i in range(3)],
             "yaw": float(yaw), "pitch": float(pitch),
@@ -545,7 +545,7 @@ def scenario():
     # 5. Turn the sun in the viewport: click its row in the Outliner (selects only the Sun),
     # then R, Z, 40, Enter with the mouse over the 3D View (Blender's own rotate operator;
     # a turn about world Z changes the azimuth only).
-    from csm_engine.blender import light_controls
+    from csm_engine.core import controls
     sun_before = sun_travel()
     outliner = next(r for a in window.screen.areas if a.type == 'OUTLINER'
                     for r in a.regions if r.type == 'WINDOW')
@@ -565,8 +565,8 @@ def scenario():
     edited = sun_travel()
     record(5, "light_edited", screenshot(5, "light_edited"), sun_before=list(sun_before),
            sun_after=edited, turned_degrees=_angle(edited, sun_before),
-           azimuth_elevation_before=list(light_controls.azimuth_elevation_from_travel(sun_before)),
-           azimuth_elevation_after=list(light_controls.azimuth_elevation_from_travel(edited)),
+           azimuth_elevation_before=list(controls.azimuth_elevation_from_travel(sun_before)),
+           azimuth_elevation_after=list(controls.azimuth_elevation_from_travel(edited)),
            engine=scene.render.engine, shading=space.shading.type,
            file_sun_direction=[float(v) for v in _file_direction()])
 

@@ -20,7 +20,7 @@ import pytest
 from tests.bpy.bpy_helpers import load_png, render_scene
 from tests.conftest import REPO
 from csm_engine.blender import keymap, light_controls, operators, ui
-from csm_engine.core import paths
+from csm_engine.core import controls, paths
 from csm_engine.render import shaders
 
 DEFAULT_SCENE = os.path.join(REPO, "csm_engine", "data", "scenes", "default.json")
@@ -34,7 +34,7 @@ def _lit_plane(scene):
     scene.collection.objects.link(plane)
     sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", 'SUN'))
     scene.collection.objects.link(sun)
-    light_controls.set_sun_travel(sun, light_controls.travel_from_azimuth_elevation(0, 45))
+    light_controls.set_sun_travel(sun, controls.travel_from_azimuth_elevation(0, 45))
     camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     camera.location = (0.0, 0.0, 6.0)
     scene.collection.objects.link(camera)
