@@ -332,11 +332,32 @@ def parse_scene(text: str, source: str) -> SceneDescription:
 
 
 def load_scene(path) -> SceneDescription:
-    """Read and parse the scene file at ``path`` (UTF-8, an optional BOM is fine)."""
+    """Read and parse the scene file at ``path`` (UTF-8, an optional BOM is fine).
+
+    Only a regular file of at most 64 MiB is read: a FIFO would block forever and a device
+    such as /dev/zero would never end. (The largest course scene is a few kilobytes.)
+    """
+    import stat
+
+    max_bytes = 64 * 1024 * 1024
     source = os.fspath(path)
+    # NOTE: O_NONBLOCK makes opening a FIFO return at once; fstat on the open descriptor
+    # then refuses it, with no window for a swap between a check and the read.
+    def nonblocking(name, flags):
+        return os.open(name, flags | getattr(os, "O_NONBLOCK", 0))
+
     try:
-        with open(source, "rb") as stream:
-            raw = stream.read()
+        with open(source, "rb", opener=nonblocking) as stream:
+            mode = os.fstat(stream.fileno()).st_mode
+            if stat.S_ISDIR(mode):
+                raise IsADirectoryError
+            if not stat.S_ISREG(mode):
+                kind = ("a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
+                        "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else
+                        "a socket" if stat.S_ISSOCK(mode) else "not a regular file")
+                raise SceneFormatError(source, f"is {kind}, not a regular file; only regular "
+                                               f"files are read as scenes")
+            raw = stream.read(max_bytes + 1)
     except IsADirectoryError:
         raise SceneFormatError(source, "is a folder, not a scene file") from None
     except FileNotFoundError:
@@ -345,6 +366,9 @@ def load_scene(path) -> SceneDescription:
         raise SceneFormatError(source, "cannot read the file (permission denied)") from None
     except OSError as err:
         raise SceneFormatError(source, f"cannot read the file ({err.strerror or err})") from None
+    if len(raw) > max_bytes:
+        raise SceneFormatError(source, f"the file is larger than the limit of "
+                                       f"{max_bytes // (1024 * 1024)} MiB for scene files")
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as err:
