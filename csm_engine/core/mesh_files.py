@@ -362,7 +362,6 @@ def check_obj(path, size):
     folder = os.path.dirname(path)
     vertices = 0
     faces = 0
-    valid_faces = 0
     # Positive indices may point forward; a face is valid when its largest index exists
     # by the end, so keep the smallest such maximum over faces that are otherwise valid.
     smallest_needed = None
@@ -384,8 +383,7 @@ def check_obj(path, size):
         raise MeshFileError(path, "OBJ without any face ('f' line): nothing to draw")
     if vertices == 0:
         raise MeshFileError(path, f"OBJ with {faces} faces but no vertices ('v' lines)")
-    valid_faces = smallest_needed is not None and smallest_needed <= vertices
-    if not valid_faces:
+    if smallest_needed is None or smallest_needed > vertices:
         detail = f"; line {first_bad[0]} refers to vertex {_shown(first_bad[1])}" \
             if first_bad else ""
         raise MeshFileError(path, f"none of its {faces} faces has valid vertex indices (the "
@@ -406,14 +404,15 @@ def _obj_line(path, folder, line, line_number, vertices, faces, smallest_needed,
                 if first_bad is None:
                     first_bad = (line_number, corner.split(b"/", 1)[0])
                 break
+            if index > vertices and first_bad is None:
+                # Only a hint for the message: the vertex may still come later in the file.
+                first_bad = (line_number, str(index).encode())
             largest = max(largest, index)
         if largest is not None and len(corners) >= 3:
             if smallest_needed is None or largest < smallest_needed:
                 smallest_needed = largest
         elif largest is not None and first_bad is None:
             first_bad = (line_number, b" ".join(corners) or b"(nothing)")
-        if largest is not None and largest > vertices and first_bad is None:
-            first_bad = (line_number, str(largest).encode())
         return vertices, faces + 1, smallest_needed, first_bad
     if stripped.startswith(b"mtllib"):
         rest = stripped[len(b"mtllib"):].decode("utf-8", "replace")
