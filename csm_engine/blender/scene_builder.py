@@ -3,20 +3,26 @@
 Owns the Blender side of scene import: one collection per imported file (named after
 the file, remembering its source in the custom property ``csm_source``), with a sun, point
 lights, a camera and the mesh files loaded by Blender's own importers. Parsing and
-validation live in ``scene_format``; axis and transform conventions in ``conventions``.
+validation live in ``scene_format``; axis and transform conventions in ``conventions``;
+what makes a mesh file safe to hand to an importer in ``mesh_files``.
 
 The import is a transaction. Everything that can be checked without Blender (the JSON,
-every mesh path, the importers) is checked before any datablock is created. If an
-importer still fails, every datablock created since the start is removed and the
-scene camera, active collection and selection are restored, so the scene is exactly as
-it was. Every failure is one ``SceneImportError`` with a one-line message.
+every mesh path, every mesh file and the files it references, the importers) is checked
+before any datablock is created. If an importer still fails, every datablock created since
+the start is removed and the scene camera, active collection and selection are restored,
+so the scene is exactly as it was. What importers change outside their datablocks (scene
+custom properties, add-on preferences) is put back after every import, failed or not.
+Every failure is one ``SceneImportError`` with a one-line message; importers' own output
+(progress, tracebacks) is captured and shown only with ``CSM_DEBUG`` set.
+
+Each distinct mesh file is imported once; further references to it get linked copies
+(objects sharing its mesh data), each under its own transform.
 
 Re-importing a file replaces its previous import, but only once the new import has
 succeeded.
 """
 
 import contextlib
-import json
 import math
 import os
 import re
@@ -25,7 +31,8 @@ import bpy
 import mathutils
 import numpy as np
 
-from ..core import conventions, scene_format
+from ..core import conventions, mesh_files, scene_format
+from ..core.captured_output import CapturedOutput
 from . import compat
 
 # CSM treats a point light's power / 100 W as its intensity multiplier, so 100 W is the
@@ -143,33 +150,14 @@ def _find_importer(extension):
     return None
 
 
-def _check_gltf_buffers(mesh_path, scene_path, json_path):
-    """A .gltf names external .bin files; find missing ones now, not halfway through."""
+def _check_mesh_file(mesh_path, scene_path, json_path):
+    """Refuse, before anything is created, a mesh file Blender's importer must not see:
+    one that could crash or hang it, or that would import as nothing
+    (``core/mesh_files.py``)."""
     try:
-        with open(mesh_path, "rb") as stream:
-            document = json.loads(stream.read().decode("utf-8-sig"))
-    except (UnicodeDecodeError, ValueError, RecursionError) as err:
-        detail = str(err).split("\n")[0]
-        raise SceneImportError(_one_line(
-            f"{scene_path}: {json_path}: {mesh_path} is not a valid glTF file ({detail})")) from None
-    except OSError as err:
-        raise SceneImportError(_one_line(
-            f"{scene_path}: {json_path}: cannot read {mesh_path} ({err.strerror or err})")) from None
-    buffers = document.get("buffers", []) if isinstance(document, dict) else []
-    if not isinstance(document, dict) or not isinstance(buffers, list):
-        raise SceneImportError(
-            f"{scene_path}: {json_path}: {mesh_path} is not a valid glTF file (not a glTF object)")
-    from urllib.parse import unquote
-    folder = os.path.dirname(mesh_path)
-    for index, buffer in enumerate(buffers):
-        uri = buffer.get("uri") if isinstance(buffer, dict) else None
-        if not isinstance(uri, str) or uri.startswith("data:"):
-            continue
-        buffer_path = os.path.join(folder, unquote(uri))
-        if not os.path.isfile(buffer_path):
-            raise SceneImportError(_one_line(
-                f"{scene_path}: {json_path}: {mesh_path} needs buffer file {buffer_path} "
-                f"(buffers[{index}].uri), which does not exist"))
+        mesh_files.check_mesh_file(mesh_path)
+    except mesh_files.MeshFileError as err:
+        raise SceneImportError(_one_line(f"{scene_path}: {json_path}: {err}")) from None
 
 
 def _one_line(text):
@@ -191,6 +179,7 @@ class _PlannedObject:
 def _plan(scene_path, description, cwd):
     planned = []
     importers = {}
+    checked = set()
     for index, scene_object in enumerate(description.objects):
         json_path = f"objects[{index}].mesh"
         try:
@@ -206,8 +195,9 @@ def _plan(scene_path, description, cwd):
             raise SceneImportError(
                 f"{scene_path}: {json_path}: this Blender has no importer for "
                 f"'{extension}' files (is the add-on for it disabled?)")
-        if extension == ".gltf":
-            _check_gltf_buffers(mesh_path, scene_path, json_path)
+        if mesh_path not in checked:
+            _check_mesh_file(mesh_path, scene_path, json_path)
+            checked.add(mesh_path)
         planned.append(_PlannedObject(index, scene_object, mesh_path, importer))
     return planned
 
@@ -293,6 +283,71 @@ class _SceneState:
         self.view_layer.objects.active = self.active_object
 
 
+def _plain(value):
+    """An ID property's value as plain Python (groups and arrays copied), for comparing
+    and restoring after the IDProperty itself has changed."""
+    if hasattr(value, "to_dict"):
+        return value.to_dict()
+    if hasattr(value, "to_list"):
+        return value.to_list()
+    return value
+
+
+def _preference_values(preferences):
+    values = {}
+    for addon in preferences.addons:
+        addon_preferences = getattr(addon, "preferences", None)
+        if addon_preferences is None:
+            continue
+        for prop in addon_preferences.bl_rna.properties:
+            if prop.identifier == "rna_type" or prop.type in ('POINTER', 'COLLECTION'):
+                continue
+            with contextlib.suppress(Exception):
+                value = getattr(addon_preferences, prop.identifier)
+                values[(addon.module, prop.identifier)] = \
+                    tuple(value) if getattr(prop, "is_array", False) else value
+    return values
+
+
+class _OutsideChanges:
+    """What Blender's importers change outside the import's own datablocks, put back after
+    every import, failed or not: custom properties of the scenes (the glTF importer stores
+    a glTF scene's ``extras`` there, and its KHR_materials_variants list) and the user's
+    preferences (KHR_materials_variants turns on a glTF add-on preference and marks the
+    preferences dirty, so auto-save would write it)."""
+
+    def __init__(self, scenes):
+        self.scenes = []
+        for scene in scenes:
+            if all(scene != kept for kept, _ in self.scenes):
+                self.scenes.append((scene, {key: _plain(scene[key]) for key in scene.keys()}))
+        preferences = bpy.context.preferences
+        self.preferences_dirty = preferences.is_dirty
+        self.preference_values = _preference_values(preferences)
+
+    def restore(self):
+        for scene, before in self.scenes:
+            with contextlib.suppress(ReferenceError):
+                for key in list(scene.keys()):
+                    if key not in before:
+                        del scene[key]
+                    elif _plain(scene[key]) != before[key]:
+                        scene[key] = before[key]
+                for key, value in before.items():
+                    if key not in scene:
+                        scene[key] = value
+        preferences = bpy.context.preferences
+        now = _preference_values(preferences)
+        for (module, name), value in self.preference_values.items():
+            if now.get((module, name), value) != value:
+                addon = preferences.addons.get(module)
+                with contextlib.suppress(Exception):
+                    setattr(addon.preferences, name, value)
+        if preferences.is_dirty != self.preferences_dirty:
+            with contextlib.suppress(Exception):
+                preferences.is_dirty = self.preferences_dirty
+
+
 def _remove_datablocks(created):
     """Remove the given datablocks; objects and collections first so data loses users."""
     first = [block for kind in ("objects", "collections") for block in created.get(kind, [])]
@@ -328,8 +383,10 @@ def _remove_import(collection):
     collections = list(_walk_collections(collection))
     objects = list(collection.all_objects)
     removed_names = {}
+    collection_pointers = {c.as_pointer() for c in collections}
     only_here = [obj for obj in objects
-                 if all(c in collections for c in obj.users_collection)]
+                 if all(c.as_pointer() in collection_pointers for c in obj.users_collection)]
+    only_here_pointers = {obj.as_pointer() for obj in only_here}
     data = [obj.data for obj in only_here if obj.data is not None]
     materials, node_groups, images = [], [], []
     for obj in only_here:
@@ -343,7 +400,7 @@ def _remove_import(collection):
     for material in materials:
         _material_dependencies(material, node_groups, images)
     for obj in objects:
-        if obj not in only_here:
+        if obj.as_pointer() not in only_here_pointers:
             for c in collections:
                 if obj.name in c.objects:
                     c.objects.unlink(obj)
@@ -373,6 +430,7 @@ def _take_back_names(created, removed_names):
 
     Blender numbered the new datablocks (``name.001``) while the old import still held
     the plain names; each new block takes the first freed name with the same base.
+    Linear in the number of blocks (an import of 10,000 copies renames 10,000 objects).
     """
     def base_of(name):
         match = _NUMBERED.match(name)
@@ -381,20 +439,32 @@ def _take_back_names(created, removed_names):
     def number_of(name):
         return name[len(base_of(name)):]
 
+    freed_by_base = {}      # (type name, base) -> [freed names, best first], next index
+    for type_name, names in removed_names.items():
+        for name in names:
+            freed_by_base.setdefault((type_name, base_of(name)), [[], 0])[0].append(name)
+    for entry in freed_by_base.values():
+        entry[0].sort(key=lambda n: (len(number_of(n)), n))
     for kind, blocks in created.items():
         numbered = sorted((b for b in blocks if _NUMBERED.match(b.name)),
                           key=lambda b: (base_of(b.name), len(b.name), b.name))
+        if not numbered:
+            continue
+        taken = {block.name for block in getattr(bpy.data, kind)}
         for block in numbered:
-            freed = removed_names.get(type(block).__name__, set())
-            base = base_of(block.name)
-            candidates = sorted((n for n in freed if base_of(n) == base),
-                                key=lambda n: (len(number_of(n)), n))
-            for candidate in candidates:
-                if candidate == block.name:
-                    break
-                if candidate not in getattr(bpy.data, kind):
-                    block.name = candidate
-                    break
+            entry = freed_by_base.get((type(block).__name__, base_of(block.name)))
+            if entry is None:
+                continue
+            candidates, start = entry
+            while start < len(candidates) and candidates[start] in taken:
+                start += 1      # a name never becomes free again during this loop
+            entry[1] = start
+            if start < len(candidates):
+                old_name = block.name
+                block.name = candidates[start]
+                taken.discard(old_name)
+                taken.add(block.name)
+                entry[1] = start + 1
 
 
 # --------------------------------------------------------------------------- build
@@ -435,14 +505,18 @@ def _importer_reason(err):
     return type(err).__name__
 
 
-def _import_mesh(planned, collection, scene_path):
-    """Run one importer; return the parent empty carrying the file's object transform."""
+def _new_parent(planned, collection=None):
+    """The empty carrying one scene object's transform; the file's objects hang below it.
+
+    Linked to ``collection`` when given; copies are linked all together later (linking
+    one by one between other edits makes Blender resync the view layer each time)."""
     item = planned.scene_object
     stem = os.path.splitext(os.path.basename(planned.mesh_path))[0]
     # Named apart from the importer's objects, which often carry the file's name too.
     parent = bpy.data.objects.new(f"{stem} (scene object {planned.index})", None)
     parent.empty_display_type = 'PLAIN_AXES'
-    collection.objects.link(parent)
+    if collection is not None:
+        collection.objects.link(parent)
     location, rotation_mode, euler, scale = conventions.blender_object_transform_zup(
         item.translate, item.rotate, item.scale)
     parent.location = location
@@ -450,23 +524,58 @@ def _import_mesh(planned, collection, scene_path):
     parent.rotation_euler = euler
     parent.scale = scale
     parent["csm_mesh"] = planned.mesh_path
+    return parent
 
-    before = {obj.as_pointer() for obj in bpy.data.objects}
-    try:
-        result = planned.importer.run(planned.mesh_path)
-    except Exception as err:  # importers raise anything from RuntimeError to KeyError
-        reason = _importer_reason(err)
+
+def _debug_output():
+    """CSM_DEBUG set: importers' own output (tracebacks included) is passed through."""
+    return bool(os.environ.get("CSM_DEBUG"))
+
+
+def _run_importer(planned, scene_path):
+    """Run the importer with its output captured at the file-descriptor level.
+
+    Importers print progress and, on failure, the whole Python traceback (bpy.ops prints
+    it before raising); the user gets one line instead, and the full log only with
+    CSM_DEBUG set.
+    """
+    failure = None
+    with CapturedOutput() as captured:
+        try:
+            result = planned.importer.run(planned.mesh_path)
+        except Exception as err:  # importers raise anything from RuntimeError to KeyError
+            failure = err
+    if _debug_output() and (captured.text or failure is not None):
+        import sys
+        details = f"\n{failure}" if failure is not None else ""
+        sys.stderr.write(f"CSM_DEBUG: {planned.importer.label} on {planned.mesh_path}:\n"
+                         f"{captured.text}{details}\n")
+        sys.stderr.flush()
+    if failure is not None:
         raise SceneImportError(_one_line(
             f"{scene_path}: {planned.json_path}: Blender's {planned.importer.label} "
-            f"failed on {planned.mesh_path}: {reason}")) from None
+            f"failed on {planned.mesh_path}: {_importer_reason(failure)}")) from None
     if 'FINISHED' not in result:
         raise SceneImportError(_one_line(
             f"{scene_path}: {planned.json_path}: Blender's {planned.importer.label} "
             f"could not read {planned.mesh_path}"))
+
+
+def _import_mesh(planned, collection, scene_path):
+    """Run one importer; return the parent empty and the file's objects below it."""
+    parent = _new_parent(planned, collection)
+    before = {obj.as_pointer() for obj in bpy.data.objects}
+    _run_importer(planned, scene_path)
     new_objects = [obj for obj in bpy.data.objects if obj.as_pointer() not in before]
-    if not any(obj.type == 'MESH' for obj in new_objects):
+    meshes = [obj for obj in new_objects if obj.type == 'MESH']
+    if not meshes:
         raise SceneImportError(_one_line(
             f"{scene_path}: {planned.json_path}: {planned.mesh_path} contains no mesh"))
+    if not any(len(obj.data.polygons) for obj in meshes):
+        # The STL and OBJ importers report success for files they read nothing from.
+        raise SceneImportError(_one_line(
+            f"{scene_path}: {planned.json_path}: {planned.mesh_path} is not a valid mesh "
+            f"file: Blender's {planned.importer.label} read no faces from it"))
     for obj in new_objects:
         _link_only_to(obj, collection)
         if obj.parent is None:
@@ -477,17 +586,76 @@ def _import_mesh(planned, collection, scene_path):
             obj.parent = parent
             obj.matrix_parent_inverse = mathutils.Matrix.Identity(4)
             obj.matrix_basis = basis
+    return parent, new_objects
+
+
+def _copy_import(planned, first_parent, first_objects, unlinked):
+    """A further reference to a file already imported: linked copies of its objects.
+
+    NOTE: running the importer again per reference costs a view-layer update over the whole
+    scene each time (quadratic: 3,000 references took 23 minutes); copies share the mesh
+    data, so N references cost one import plus N cheap object copies. The new objects are
+    appended to ``unlinked``, for the caller to link in one go.
+    """
+    parent = _new_parent(planned)
+    unlinked.append(parent)
+    copies = {first_parent.as_pointer(): parent}
+    for obj in first_objects:
+        copies[obj.as_pointer()] = obj.copy()      # shares obj.data: a linked duplicate
+    for obj in first_objects:
+        copy = copies[obj.as_pointer()]
+        unlinked.append(copy)
+        if obj.parent is not None:
+            matrix_parent_inverse = obj.matrix_parent_inverse.copy()
+            copy.parent = copies.get(obj.parent.as_pointer(), obj.parent)
+            copy.matrix_parent_inverse = matrix_parent_inverse
+        for modifier in copy.modifiers:            # e.g. an armature of the file's skin
+            target = getattr(modifier, "object", None)
+            if target is not None and target.as_pointer() in copies:
+                modifier.object = copies[target.as_pointer()]
     return parent
 
 
-def _mesh_bounds(objects):
-    """World-space (min, max) corners of the mesh objects' bounding boxes, or None."""
+def _corners_in_parent(parent, objects):
+    """Bounding-box corners of the mesh objects below ``parent``, in the parent's space
+    (the mesh file's own frame), as an (n, 3) array; needs an updated view layer."""
+    bounds = _mesh_bounds(objects, np.linalg.inv(np.array(parent.matrix_world, np.float64)))
+    if bounds is None:
+        return np.zeros((0, 3))
+    low, high = bounds
+    return np.array([[x, y, z] for x in (low[0], high[0]) for y in (low[1], high[1])
+                     for z in (low[2], high[2])])
+
+
+def _placed_bounds(planned, corners_by_file):
+    """World (min, max) of every scene object's mesh, from its file's corners and its
+    transform: numpy over the file's transforms, not Blender over every object."""
+    points = []
+    for item in planned:
+        corners = corners_by_file[item.mesh_path]
+        if not len(corners):
+            continue
+        o = item.scene_object
+        matrix = conventions.object_matrix_zup(o.translate.as_tuple(), o.rotate.as_tuple(),
+                                               o.scale.as_tuple())
+        points.append(corners @ matrix[:3, :3].T + matrix[:3, 3])
+    if not points:
+        return None
+    points = np.concatenate(points)
+    return points.min(axis=0), points.max(axis=0)
+
+
+def _mesh_bounds(objects, space_from_world=None):
+    """(min, max) corners of the mesh objects' bounding boxes in world space (or in the
+    space ``space_from_world`` maps to), or None."""
     corners = []
     for obj in objects:
         if obj.type != 'MESH':
             continue
         local = np.array([tuple(corner) for corner in obj.bound_box], dtype=np.float64)
         world = np.array(obj.matrix_world, dtype=np.float64)
+        if space_from_world is not None:
+            world = space_from_world @ world
         corners.append(local @ world[:3, :3].T + world[:3, 3])
     if not corners:
         return None
@@ -593,9 +761,23 @@ def _build(description, planned, scene, view_layer, scene_path, name):
     for obj in view_layer.objects:
         obj.select_set(False, view_layer=view_layer)
 
-    parents = [_import_mesh(item, collection, scene_path) for item in planned]
-    view_layer.update()
-    bounds = _mesh_bounds(collection.all_objects)
+    parents = []
+    imported = {}       # mesh path -> (parent, objects) of its first, real import
+    corners_by_file = {}
+    unlinked = []
+    for item in planned:
+        first = imported.get(item.mesh_path)
+        if first is None:
+            parent, objects = _import_mesh(item, collection, scene_path)
+            imported[item.mesh_path] = (parent, objects)
+            view_layer.update()     # while the scene is small: only for distinct files
+            corners_by_file[item.mesh_path] = _corners_in_parent(parent, objects)
+        else:
+            parent = _copy_import(item, first[0], first[1], unlinked)
+        parents.append(parent)
+    for obj in unlinked:
+        collection.objects.link(obj)
+    bounds = _placed_bounds(planned, corners_by_file)
     if bounds is None:
         bounds = (np.full(3, -1.0), np.full(3, 1.0))
 
@@ -612,8 +794,9 @@ def _build(description, planned, scene, view_layer, scene_path, name):
     scene.camera = camera
     _ensure_world(scene)
 
+    in_layer = {obj.as_pointer() for obj in view_layer.objects}
     for obj in collection.all_objects:
-        if obj.name in view_layer.objects:
+        if obj.as_pointer() in in_layer:
             obj.select_set(True, view_layer=view_layer)
     view_layer.objects.active = parents[0] if parents else camera
     # Callers (the renderer, tests) read matrix_world right away.
@@ -641,6 +824,7 @@ def import_scene_file(path, scene=None):
     name = os.path.splitext(os.path.basename(scene_path))[0]
 
     state = _SceneState(scene, view_layer)
+    outside = _OutsideChanges((scene, bpy.context.scene))
     snapshot = _data_snapshot()
     try:
         with override:
@@ -648,6 +832,7 @@ def import_scene_file(path, scene=None):
     except BaseException as err:
         _remove_datablocks(_created_since(snapshot))
         state.restore()
+        outside.restore()
         if isinstance(err, SceneImportError):
             raise
         if not isinstance(err, Exception):
@@ -655,6 +840,7 @@ def import_scene_file(path, scene=None):
         raise SceneImportError(_one_line(
             f"{scene_path}: import failed: {type(err).__name__}: {err}")) from err
 
+    outside.restore()
     collection["csm_source"] = scene_path
     collection["csm_import_order"] = order
     created = _created_since(snapshot)
