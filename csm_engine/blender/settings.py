@@ -47,6 +47,15 @@ DEBUG_VIEWS_LABELS = {
     'SPECULAR': ("G-buffer: specular", "Specular strength (red) and shininess / 256 (green)"),
 }
 
+LIGHT_FALLOFFS_LABELS = {
+    'PHYSICAL': ("Physical", "Inverse square, as in EEVEE and Cycles: a point or spot light's "
+                             "Power in watts, cut off smoothly at Custom Distance or where it "
+                             "falls below EEVEE's Light Threshold"),
+    'LINEAR_RADIUS': ("Linear to radius", "The course's falloff: full strength at the light, "
+                                          "linearly to zero at its radius (Custom Distance); "
+                                          "100 W shines with exactly the light's colour"),
+}
+
 
 def _enum_items(identifiers, labels):
     """EnumProperty items in core's order (core owns the identifiers, and the GLSL values
@@ -59,12 +68,18 @@ def _enum_items(identifiers, labels):
 SPLIT_SCHEMES = _enum_items(frame_layout.SPLIT_SCHEMES, SPLIT_SCHEMES_LABELS)
 PCF_PATTERNS = _enum_items(frame_layout.PCF_PATTERNS, PCF_PATTERNS_LABELS)
 DEBUG_VIEWS = _enum_items(frame_layout.DEBUG_VIEWS, DEBUG_VIEWS_LABELS)
+# 'PER_LIGHT' is not a falloff of its own: snapshot.py picks one of the others per light.
+LIGHT_FALLOFFS = (('PER_LIGHT', "Per light", "Lights imported from a course scene file (they "
+                   "carry the custom property csm_radius) fall off linearly to their radius; "
+                   "every other light is physical, as in EEVEE"),) + \
+    _enum_items(frame_layout.LIGHT_FALLOFFS, LIGHT_FALLOFFS_LABELS)
 
 # Spelled out so the CLI's --set can report the valid choices.
 ENUM_ITEMS = {
     "split_scheme": SPLIT_SCHEMES,
     "pcf_pattern": PCF_PATTERNS,
     "debug_view": DEBUG_VIEWS,
+    "light_falloff": LIGHT_FALLOFFS,
 }
 
 
@@ -194,6 +209,13 @@ class CSMSettings(bpy.types.PropertyGroup):
         name="Ambient", default=1.0, min=0.0, soft_max=10.0, update=_redraw,
         description="Multiplier (0 or more) on the World colour used as ambient light. "
                     "Higher: brighter shadows and flatter shading; 0: shadows are black")
+    # NOTE: the default keeps both worlds right at once: a scene built in Blender looks as
+    # in EEVEE (inverse square, watts), an imported course scene as the course's programs.
+    light_falloff: EnumProperty(
+        name="Light Falloff", items=LIGHT_FALLOFFS, default='PER_LIGHT', update=_redraw,
+        description="How point and spot lights dim with distance: physical (inverse square "
+                    "of the Power in watts, as EEVEE), the course's linear falloff to the "
+                    "light's radius, or per light (course lights linear, others physical)")
 
 
 classes = (CSMSettings,)

@@ -2,10 +2,10 @@
 
 Owns the translation from Blender's conventions to the engine's plain data: camera matrices
 (from the scene camera for final renders, from the region for the viewport), lights (sun,
-point, spot, with colour x energy), the World colour used as ambient, the CSM settings, and
-the list of mesh instances with their world matrices. After ``take()`` returns, nothing
-downstream reads ``bpy`` properties (the evaluated objects in ``mesh_sources`` are only
-handed to the mesh cache for extraction).
+point, spot) in EEVEE's units (docs/lighting.md), the World colour used as ambient, the CSM
+settings, and the list of mesh instances with their world matrices. After ``take()``
+returns, nothing downstream reads ``bpy`` properties (the evaluated objects in
+``mesh_sources`` are only handed to the mesh cache for extraction).
 """
 
 from types import SimpleNamespace
@@ -16,10 +16,25 @@ from ..core.camera import CameraView
 from ..core.frame import FrameSnapshot, MeshInstance, PointLight, SpotLight, Sun
 from ..core.frame_layout import MAX_POINT_LIGHTS, MAX_SPOT_LIGHTS
 
-# Blender point/spot power is in watts; CSM's Blinn-Phong treats power / 100 W as the light's
-# intensity multiplier, so an imported course light (colour c, 100 W) shines with exactly c.
-POINT_WATTS_PER_UNIT = 100.0
-# Radius used for Blender lights that have no Custom Distance set.
+# Light units are EEVEE's (docs/lighting.md), so a scene keeps its exposure when it switches
+# engine. Sun Strength is irradiance (W/m^2) and the diffuse BRDF is albedo/pi (Lambert), as
+# in eevee_light.cc shape_radiance_get ("Convert irradiance to radiance") and the legacy
+# eevee_lights.c light_shape_power_get.
+#
+# A PHYSICAL point or spot light of Power P watts is a sphere whose radiance is
+# P / (4 pi r^2 * pi) (eevee_light.cc shape_radiance_get, LA_LOCAL/LA_SPOT; legacy
+# "1/(4*r²*Pi²)"); seen from distance d >> r it gives the irradiance P / (4 pi d^2), i.e. a
+# point of radiant intensity P / (4 pi) W/sr (point_radiance_get: "Convert radiant flux to
+# intensity"). Spot lights use the same conversion: the cone only masks the light.
+WATTS_TO_INTENSITY = 1.0 / (4.0 * np.pi)
+# A course light (LINEAR_RADIUS) of colour c and 100 W shines as in the course's programs:
+# c * (1 - d/radius) * albedo * cos. With the albedo/pi BRDF that is the irradiance
+# pi * c * (1 - d/radius): 100 W is the file's intensity of one.
+COURSE_WATTS_PER_UNIT = 100.0
+# EEVEE's default Light Threshold (Render > Lights): where no Custom Distance is set, a
+# physical light ends where its irradiance falls below it (attenuation_radius_get).
+DEFAULT_LIGHT_THRESHOLD = 0.01
+# Radius of a course light whose file radius is missing (linear falloff to zero there).
 DEFAULT_LIGHT_RADIUS = 20.0
 
 
@@ -107,12 +122,41 @@ def _world_color(world):
     return np.array(world.color[:3], dtype=np.float64)
 
 
-def _light_radius(light):
+def light_falloff(light, setting):
+    """The falloff a point or spot light gets: the Light Falloff setting, or per light
+    (``PER_LIGHT``): course lights, which the scene importer marks with the custom
+    property ``csm_radius``, fall off linearly to it; every other light is physical."""
+    if setting != 'PER_LIGHT':
+        return setting
+    return 'LINEAR_RADIUS' if "csm_radius" in light else 'PHYSICAL'
+
+
+def _light_radius(light, falloff, light_threshold):
+    """Where the light ends (scene units). LINEAR_RADIUS: the course radius (the Custom
+    Distance, which the importer sets to it, else ``csm_radius``). PHYSICAL: EEVEE's
+    influence radius (eevee_light.cc attenuation_radius_get): the Custom Distance if set,
+    else the distance at which max(colour) * power / 100 W reaches the Light Threshold by
+    the inverse-square law."""
     if getattr(light, "use_custom_distance", False):
         return float(light.cutoff_distance)
-    if "csm_radius" in light:
-        return float(light["csm_radius"])
-    return DEFAULT_LIGHT_RADIUS
+    if falloff == 'LINEAR_RADIUS':
+        return float(light["csm_radius"]) if "csm_radius" in light else DEFAULT_LIGHT_RADIUS
+    power = max(light.color[:3]) * abs(light.energy) / 100.0
+    return float(np.sqrt(max(power, 0.0) / max(light_threshold, 1e-16)))
+
+
+def _light_threshold(scene):
+    eevee = getattr(scene, "eevee", None)
+    threshold = getattr(eevee, "light_threshold", None) if eevee is not None else None
+    return float(threshold) if threshold is not None else DEFAULT_LIGHT_THRESHOLD
+
+
+def _local_light_color(light, falloff):
+    """Colour x power in the units of the falloff (see the constants above)."""
+    color = np.array(light.color[:3], dtype=np.float64) * light.energy
+    if falloff == 'LINEAR_RADIUS':
+        return color * (np.pi / COURSE_WATTS_PER_UNIT)
+    return color * WATTS_TO_INTENSITY
 
 
 def take(depsgraph, camera, is_viewport=False):
@@ -123,7 +167,10 @@ def take(depsgraph, camera, is_viewport=False):
                          warnings=warnings,
                          film_transparent=bool(scene.render.film_transparent),
                          scene_name=scene.name)
+    # The World is a uniform radiance L: a diffuse surface receives the irradiance pi * L
+    # and sends back albedo/pi of it, so ambient light is L * albedo, as in EEVEE.
     world_color = _world_color(scene.world)
+    light_threshold = _light_threshold(scene)
     snap.ambient = world_color * snap.settings.ambient_strength
     snap.background = world_color
 
@@ -132,7 +179,7 @@ def take(depsgraph, camera, is_viewport=False):
         if is_viewport and hasattr(instance, "show_self") and not instance.show_self:
             continue
         if obj.type == 'LIGHT':
-            _add_light(snap, obj, _matrix(instance.matrix_world))
+            _add_light(snap, obj, _matrix(instance.matrix_world), light_threshold)
         elif obj.type in {'MESH', 'CURVE', 'SURFACE', 'FONT', 'META'}:
             key = obj.original.name if obj.original else obj.name
             snap.instances.append(MeshInstance(key, _matrix(instance.matrix_world)))
@@ -145,7 +192,7 @@ def take(depsgraph, camera, is_viewport=False):
     return snap
 
 
-def _add_light(snap, obj, world_from_light):
+def _add_light(snap, obj, world_from_light, light_threshold=DEFAULT_LIGHT_THRESHOLD):
     light = obj.data
     color = np.array(light.color[:3], dtype=np.float64)
     axis_z = world_from_light[:3, 2] / max(np.linalg.norm(world_from_light[:3, 2]), 1e-12)
@@ -153,21 +200,27 @@ def _add_light(snap, obj, world_from_light):
     casts_shadow = bool(getattr(light, "use_shadow", True))
     if light.type == 'SUN':
         if snap.sun is None:   # the first sun casts the cascades; CSM has one sun
+            # Strength is the irradiance (W/m^2) on a surface facing the sun.
             snap.sun = Sun(to_light=axis_z, color=color * light.energy,
                            casts_shadow=casts_shadow, name=obj.name)
-    elif light.type == 'POINT':
-        snap.points.append(PointLight(position, color * light.energy / POINT_WATTS_PER_UNIT,
-                                      _light_radius(light)))
-    elif light.type == 'SPOT':
+        return
+    if light.type not in {'POINT', 'SPOT'}:
+        return      # AREA lights are not supported by CSM (neither by the course)
+    falloff = light_falloff(light, snap.settings.light_falloff)
+    radius = _light_radius(light, falloff, light_threshold)
+    if light.type == 'POINT':
+        snap.points.append(PointLight(position, _local_light_color(light, falloff), radius,
+                                      falloff))
+    else:
         rotation = world_from_light.copy()
         for c in range(3):
             rotation[:3, c] /= max(np.linalg.norm(rotation[:3, c]), 1e-12)
         snap.spots.append(SpotLight(
             position=position, direction=-axis_z,
-            color=color * light.energy / POINT_WATTS_PER_UNIT,
-            radius=_light_radius(light), spot_size=float(light.spot_size),
+            color=_local_light_color(light, falloff),
+            radius=radius, spot_size=float(light.spot_size),
             spot_blend=float(light.spot_blend), casts_shadow=casts_shadow,
             world_from_light=rotation,
-            clip_start=float(getattr(light, "shadow_buffer_clip_start", 0.05) or 0.05)))
-    # AREA lights are not supported by CSM (neither by the course); they are ignored.
+            clip_start=float(getattr(light, "shadow_buffer_clip_start", 0.05) or 0.05),
+            falloff=falloff))
 

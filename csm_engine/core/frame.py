@@ -16,7 +16,7 @@ from .camera import CameraView
 @dataclass
 class Sun:
     to_light: np.ndarray        # unit vector pointing towards the sun
-    color: np.ndarray           # colour x strength
+    color: np.ndarray           # W/m^2 on a surface facing the sun (colour x strength)
     casts_shadow: bool
     name: str = ""
 
@@ -24,8 +24,9 @@ class Sun:
 @dataclass
 class PointLight:
     position: np.ndarray
-    color: np.ndarray
-    radius: float
+    color: np.ndarray           # see falloff: W/sr (PHYSICAL) or W/m^2 at the light
+    radius: float               # where the light ends (scene units)
+    falloff: str = "PHYSICAL"   # frame_layout.LIGHT_FALLOFFS
 
 
 @dataclass
@@ -39,6 +40,7 @@ class SpotLight:
     casts_shadow: bool
     world_from_light: np.ndarray
     clip_start: float
+    falloff: str = "PHYSICAL"   # frame_layout.LIGHT_FALLOFFS, as for PointLight
 
 
 @dataclass

@@ -27,13 +27,19 @@ DEBUG_VIEWS = ("NONE", "CASCADES", "SHADOW_FACTOR", "SHADOW_MAP", "TEXEL_DENSITY
                "NORMAL", "POSITION", "DEPTH", "SPECULAR")
 PCF_PATTERNS = ("GRID", "CROSS5", "NINE_TAP")
 SPLIT_SCHEMES = ("UNIFORM", "LOG", "HYBRID", "MANUAL")
+# How a point or spot light dims with distance (docs/lighting.md): PHYSICAL is EEVEE's
+# inverse square (with its smooth cut-off at the influence radius); LINEAR_RADIUS is the
+# course's 1 - d/radius.
+LIGHT_FALLOFFS = ("PHYSICAL", "LINEAR_RADIUS")
 
 DEBUG_VIEW_INDEX = {name: index for index, name in enumerate(DEBUG_VIEWS)}
 PCF_PATTERN_INDEX = {name: index for index, name in enumerate(PCF_PATTERNS)}
 SPLIT_SCHEME_INDEX = {name: index for index, name in enumerate(SPLIT_SCHEMES)}
+LIGHT_FALLOFF_INDEX = {name: index for index, name in enumerate(LIGHT_FALLOFFS)}
 
 # GLSL name prefix of each enum: DEBUG_VIEWS' "SHADOW_MAP" is DEBUG_SHADOW_MAP in GLSL.
-GLSL_ENUMS = (("DEBUG", DEBUG_VIEWS), ("PCF", PCF_PATTERNS), ("SPLIT", SPLIT_SCHEMES))
+GLSL_ENUMS = (("DEBUG", DEBUG_VIEWS), ("PCF", PCF_PATTERNS), ("SPLIT", SPLIT_SCHEMES),
+              ("FALLOFF", LIGHT_FALLOFFS))
 
 
 def glsl_defines():
@@ -288,18 +294,24 @@ SHADOW_TILE_LAYOUT = UniformLayout("ShadowTileData", (
 
 POINT_LIGHT_LAYOUT = UniformLayout("PointLightData", (
     ("position", "vec3", "world position (scene units)"),
-    ("radius", "float", "distance where the linear falloff reaches zero (scene units)"),
-    ("color", "vec3", "linear rgb intensity"),
+    ("radius", "float", "distance where the light ends (scene units): influence radius or "
+                        "the linear falloff's zero"),
+    ("color", "vec3", "PHYSICAL: radiant intensity (W/sr); LINEAR_RADIUS: irradiance at "
+                      "the light (W/m^2)"),
+    ("falloff", "int", "FALLOFF_* with distance"),
 ))
 
 SPOT_LIGHT_LAYOUT = UniformLayout("SpotLightData", (
     ("position", "vec3", "world position (scene units)"),
-    ("radius", "float", "distance where the linear falloff reaches zero (scene units)"),
-    ("color", "vec3", "linear rgb intensity"),
+    ("radius", "float", "distance where the light ends (scene units): influence radius or "
+                        "the linear falloff's zero"),
+    ("color", "vec3", "PHYSICAL: radiant intensity (W/sr); LINEAR_RADIUS: irradiance at "
+                      "the light (W/m^2)"),
     ("shadow_tile", "int", "index into shadow_tiles, -1 when the spot casts no shadow"),
     ("direction", "vec3", "unit world direction the spot shines along"),
     ("cos_outer", "float", "cosine of the half cone angle: no light outside it"),
     ("cos_inner", "float", "cosine of the angle where the edge blend begins: full inside"),
+    ("falloff", "int", "FALLOFF_* with distance"),
 ))
 
 # Everything the G-buffer and lighting passes read for one frame. Packed by
@@ -312,12 +324,13 @@ FRAME_LAYOUT = UniformLayout("FrameData", (
     ("is_perspective", "int", "1 perspective camera, 0 orthographic"),
     ("camera_forward", "vec3", "unit world direction the camera looks along"),
     ("viewport_size", "vec2", "width and height of the render (pixels)"),
-    ("ambient_color", "vec3", "linear rgb ambient light"),
+    ("ambient_color", "vec3", "uniform World radiance lighting every surface (linear rgb, "
+                              "W/m^2/sr)"),
     ("background_alpha", "float", "alpha of background pixels: 0 with Film > Transparent"),
     ("background_color", "vec3", "linear rgb of the World behind the scene"),
     ("sun_direction", "vec3", "unit world direction towards the sun"),
     ("has_sun", "int", "1 if the scene has a sun, 0 otherwise"),
-    ("sun_color", "vec3", "linear rgb intensity of the sun"),
+    ("sun_color", "vec3", "sun irradiance on a surface facing it (linear rgb, W/m^2)"),
     ("sun_casts_shadow", "int", "1 if the sun casts shadows (cascade_count > 0)"),
     ("cascade_count", "int", "cascades in use, 0..MAX_CASCADES"),
     ("shadow_distance", "float", "view depth where sun shadows end (scene units)"),

@@ -13,8 +13,9 @@ import numpy as np
 
 from . import cascades
 from .frame import spot_cone_cosines
-from .frame_layout import (DEBUG_VIEW_INDEX, FRAME_LAYOUT, MAX_CASCADES, MAX_POINT_LIGHTS,
-                           MAX_SHADOW_TILES, MAX_SPOT_LIGHTS, PCF_PATTERN_INDEX)
+from .frame_layout import (DEBUG_VIEW_INDEX, FRAME_LAYOUT, LIGHT_FALLOFF_INDEX, MAX_CASCADES,
+                           MAX_POINT_LIGHTS, MAX_SHADOW_TILES, MAX_SPOT_LIGHTS,
+                           PCF_PATTERN_INDEX)
 
 CASCADE_LINE_COLORS = ((1, .2, .2, 1), (.2, 1, .2, 1), (.3, .4, 1, 1), (1, 1, .2, 1))
 
@@ -189,14 +190,16 @@ def pack_frame(snap, plan):
                       texel_world=tile.texel_world, light_near=tile.near, light_far=tile.far,
                       is_perspective=int(tile.is_perspective), display_near=tile.display_near)
                  for tile in plan.tiles]
-    point_rows = [dict(position=light.position, radius=light.radius, color=light.color)
+    point_rows = [dict(position=light.position, radius=light.radius, color=light.color,
+                       falloff=LIGHT_FALLOFF_INDEX[light.falloff])
                   for light in points]
     spot_rows = []
     for i, spot in enumerate(spots):
         cos_outer, cos_inner = spot_cone_cosines(spot)
         spot_rows.append(dict(position=spot.position, radius=spot.radius, color=spot.color,
                               shadow_tile=plan.spot_tiles.get(i, -1), direction=spot.direction,
-                              cos_outer=cos_outer, cos_inner=cos_inner))
+                              cos_outer=cos_outer, cos_inner=cos_inner,
+                              falloff=LIGHT_FALLOFF_INDEX[spot.falloff]))
     return FRAME_LAYOUT.pack(dict(
         clip_from_world=camera.clip_from_world,
         view_from_world=np.linalg.inv(camera.world_from_view),

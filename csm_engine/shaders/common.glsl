@@ -1,5 +1,6 @@
 /* Shared lighting and shadow code: cascade selection, shadow-atlas lookup with bias and PCF,
- * Blinn-Phong, debug colour ramps. Included by lighting_frag.glsl.
+ * Blinn-Phong in EEVEE's light units, light falloff, debug colour ramps. Included by
+ * lighting_frag.glsl.
  *
  * frame (FrameData, with ShadowTileData, CascadeData, ...) and the constants DEBUG_*, PCF_*,
  * MAX_* come from core/frame_layout.py, which generates the struct text and the #defines:
@@ -138,6 +139,16 @@ float sun_visibility(vec3 p, vec3 n, float n_dot_l, float view_depth, out float 
   return vis;
 }
 
+const float PI = 3.14159265358979;
+/* Principled BSDF's convention: Specular level 0.5 is a reflectance of 0.04 at normal
+ * incidence (glass, plastic), so F0 = 0.08 * level. */
+const float F0_PER_SPECULAR_LEVEL = 0.08;
+
+/* Outgoing radiance for an irradiance of one (W/m^2 on a surface facing the light): the
+ * BRDF times cos(angle to the light). Units as EEVEE's (docs/lighting.md): diffuse is
+ * Lambert, albedo / pi; specular is energy-normalized Blinn-Phong,
+ * F0 (n + 8) / (8 pi) (n.h)^n, whose lobe reflects about F0 of the light whatever the
+ * exponent, so a white surface never sends back more than it receives. */
 vec3 blinn_phong(vec3 albedo, float specular, float shininess, vec3 n, vec3 l, vec3 v)
 {
   float n_dot_l = max(dot(n, l), 0.0);
@@ -145,8 +156,25 @@ vec3 blinn_phong(vec3 albedo, float specular, float shininess, vec3 n, vec3 l, v
     return vec3(0.0);
   }
   vec3 h = normalize(l + v);
-  float spec = specular * pow(max(dot(n, h), 0.0), max(shininess, 1.0));
-  return albedo * n_dot_l + vec3(spec);
+  float exponent = max(shininess, 1.0);
+  float f0 = F0_PER_SPECULAR_LEVEL * specular;
+  float spec = f0 * (exponent + 8.0) / (8.0 * PI) * pow(max(dot(n, h), 0.0), exponent);
+  return (albedo / PI + vec3(spec)) * n_dot_l;
+}
+
+/* How a point or spot light's colour (see PointLightData) reaches distance d. */
+float distance_falloff(int falloff, float d, float radius)
+{
+  if (falloff == FALLOFF_LINEAR_RADIUS) {
+    /* The course's falloff: linear to zero at the light's radius. */
+    return 1.0 - min(d / max(radius, 1e-6), 1.0);
+  }
+  /* Inverse square, cut off smoothly at the influence radius as EEVEE does
+   * (light_influence_attenuation, after Frostbite). NOTE: d^2 is kept above 1 cm^2, where
+   * EEVEE's light would be a sphere of finite radiance, not a point. */
+  float x = d * d / max(radius * radius, 1e-12);
+  float window = clamp(1.0 - x * x, 0.0, 1.0);
+  return window * window / max(d * d, 1e-4);
 }
 
 vec3 cascade_color(float cascade)

@@ -81,6 +81,7 @@ void main()
                                                -frame.camera_forward;
   float view_depth = depth;
 
+  /* A uniform World of radiance L: irradiance pi * L times the Lambert BRDF albedo / pi. */
   vec3 color = frame.ambient_color * albedo;
 
   float sun_vis = 1.0;
@@ -112,8 +113,7 @@ void main()
     PointLightData light = frame.point_lights[i];
     vec3 to_light = light.position - p;
     float d = length(to_light);
-    /* The course's falloff: linear to zero at the light's radius. */
-    float attenuation = 1.0 - min(d / max(light.radius, 1e-6), 1.0);
+    float attenuation = distance_falloff(light.falloff, d, light.radius);
     if (attenuation > 0.0) {
       color += light.color * attenuation *
                blinn_phong(albedo, specular, shininess, n, to_light / max(d, 1e-6), to_camera);
@@ -130,7 +130,7 @@ void main()
     float d = length(to_light);
     vec3 l = to_light / max(d, 1e-6);
     float cone = smoothstep(spot.cos_outer, spot.cos_inner, dot(-l, normalize(spot.direction)));
-    float attenuation = (1.0 - min(d / max(spot.radius, 1e-6), 1.0)) * cone;
+    float attenuation = distance_falloff(spot.falloff, d, spot.radius) * cone;
     if (attenuation > 0.0) {
       float vis = 1.0;
       if (spot.shadow_tile >= 0) {

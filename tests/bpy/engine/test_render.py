@@ -1,4 +1,5 @@
 """The deferred renderer as a user sees it: materials, lights, camera and output options."""
+import math
 import resource
 
 import bpy
@@ -66,7 +67,8 @@ def _top_camera(scene, height=10.0, ortho_scale=None):
 def test_base_colour_texture_is_sampled(empty_scene):
     scene = empty_scene
     _textured_plane(_checker_image("checker"))
-    add_sun((0, 0, -1))
+    # pi W/m^2: the Lambert surface sends back albedo x cos (docs/lighting.md).
+    add_sun((0, 0, -1)).data.energy = math.pi
     _top_camera(scene, ortho_scale=4.0)
     color = render_scene(scene, 64, 64)["combined"]
     left, right = color[32, 8, :3], color[32, 56, :3]
@@ -104,6 +106,7 @@ def test_point_light_falls_off_linearly_to_its_radius(empty_scene):
     light.energy = 100.0                      # intensity multiplier 1 (power / 100 W)
     light.use_custom_distance = True
     light.cutoff_distance = 6.0
+    scene.csm.light_falloff = 'LINEAR_RADIUS'  # the course's falloff (docs/lighting.md)
     set_world_color(scene, (0.0, 0.0, 0.0))
     _top_camera(scene, height=10.0, ortho_scale=20.0)
     images = render_scene(scene, 200, 200)
@@ -207,7 +210,8 @@ def test_a_mirrored_object_is_lit_like_its_original(empty_scene, how):
     sunlit tops and sides of both show the same brightness, not ambient only."""
     scene = empty_scene
     set_world_color(scene, (0.02, 0.02, 0.02))
-    add_sun((0.3, 0.5, -1.0))
+    # pi W/m^2: the Lambert surface sends back albedo x cos (docs/lighting.md).
+    add_sun((0.3, 0.5, -1.0)).data.energy = math.pi
     add_box((-2, 0, 1), (1, 1, 1))                 # the original
     mirrored = add_box((2, 0, 1), (1, 1, 1))
     if how == "negative scale":
