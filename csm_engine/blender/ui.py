@@ -76,6 +76,7 @@ def draw_light(layout, context):
         col.operator("csm.reset_sun_direction", icon='FILE_REFRESH')
     col.separator()
     col.prop(context.scene.csm, "ambient_strength")
+    col.prop(context.scene.csm, "light_falloff")
     col.prop(context.scene.render, "film_transparent")
 
 
