@@ -11,6 +11,9 @@ import numpy as np
 
 # Total mesh uploads in this process; read by tests and the benchmark.
 UPLOADS = {"count": 0, "bytes": 0}
+# Serial number of the next upload: a GPUMesh's ``serial`` names its geometry, so a shadow
+# tile drawn from the same serials, matrices and light matrix need not be drawn again.
+_NEXT_SERIAL = [1]
 BYTES_PER_CORNER = 32       # position + normal + uv, float32 (see _vertex_format)
 BYTES_PER_TRIANGLE = 12     # three int32 indices
 
@@ -33,6 +36,7 @@ class GPUMesh:
     triangle_count: int
     vertex_buffer: object = None
     index_buffers: list = field(default_factory=list)
+    serial: int = 0                # unique per upload (see _NEXT_SERIAL)
 
 
 def _vertex_format():
@@ -68,8 +72,11 @@ def upload(positions, normals, uvs, triangles, material_index, object_bounds, ma
             batches.append((gpu.types.GPUBatch(type='TRIS', buf=vbo, elem=ibo), slot))
     aabb_min, aabb_max = object_bounds
     UPLOADS["count"] += 1
+    serial = _NEXT_SERIAL[0]
+    _NEXT_SERIAL[0] += 1
     UPLOADS["bytes"] += len(positions) * BYTES_PER_CORNER + len(triangles) * BYTES_PER_TRIANGLE
     return GPUMesh(batches=batches, materials=list(materials),
                    aabb_min=aabb_min.astype(np.float64), aabb_max=aabb_max.astype(np.float64),
-                   triangle_count=len(triangles), vertex_buffer=vbo, index_buffers=ibos)
+                   triangle_count=len(triangles), vertex_buffer=vbo, index_buffers=ibos,
+                   serial=serial)
 

@@ -39,8 +39,28 @@ def _column_major_stack(matrices):
     return matrices.transpose(0, 2, 1).reshape(len(matrices), 16).tolist()
 
 
+# Shadow tiles drawn and skipped in this process (a tile is skipped when its light matrix,
+# casters and their geometry are those it already holds); read by tests and the benchmark.
+SHADOW_TILES = {"drawn": 0, "skipped": 0}
+
 _BYTES_PER_TEXEL = {'RGBA32F': 16, 'RGBA16F': 8, 'R32F': 4, 'DEPTH_COMPONENT32F': 4,
                     'RGBA8': 4}
+
+
+# NOTE: a stabilized cascade's x/y (texel-snapped) do not move with a small camera move, but
+# its depth range follows the camera by a little: a tile is kept when the depth row of its
+# light matrix moved by at most this (clip units, ~1e-4 mm over a 100 m range), far below
+# any depth bias, and compared with the matrix it was drawn with, so it cannot drift.
+TILE_DEPTH_TOLERANCE = 1e-6
+
+
+def _same_tile(held, signature):
+    """Whether a tile drawn with ``held`` holds what ``signature`` would draw."""
+    if held is None or held[:3] != signature[:3] or held[4:] != signature[4:]:
+        return False
+    a, b = held[3], signature[3]
+    return bool(np.array_equal(a[(0, 1, 3), :], b[(0, 1, 3), :])
+                and np.abs(a[2] - b[2]).max() <= TILE_DEPTH_TOLERANCE)
 
 
 class RenderTargetError(Exception):
@@ -63,6 +83,7 @@ class Pipeline:
         self.profile = False
         self.skip_gpu_calls = False   # benchmark only: a frame of Python without the GPU
         self.gbuffer_fb = None      # kept after draw() for the final render's read-back
+        self.shadow_tiles = {"drawn": 0, "skipped": 0}   # of the last frame
 
     # -- resources ---------------------------------------------------------------------
     def _texture(self, name, size, fmt):
@@ -177,36 +198,55 @@ class Pipeline:
                                       dtype=np.float64).reshape(-1, 4, 4)
         world_from_objects_gl = _column_major_stack(world_from_objects)
 
-        # 1. Shadow atlas
+        # 1. Shadow atlas: only tiles whose contents would change are cleared and drawn.
         t = time.perf_counter()
         atlas_fb = self._framebuffer("atlas", depth=atlas)
+        held = self._atlas_contents(atlas)
+        # Blender 3.4's gpu.state has no scissor: there the whole atlas is cleared and drawn.
+        can_clear_tile = hasattr(gpu.state, "scissor_set")
+        signatures = self._caster_signatures(snap, cache, items)
+        cull_front = bool(snap.settings.cull_front_faces)
+        stale = []
+        for tile in plan.tiles:
+            visible = self._cull(snap.instances, bounds_lo_hi, tile)
+            clip_from_world = np.asarray(tile.clip_from_world, dtype=np.float64)
+            signature = (tuple(tile.origin), tile.resolution, cull_front,
+                         clip_from_world, world_from_objects[visible].tobytes(),
+                         tuple(signatures[i] for i in visible))
+            key = (tuple(tile.origin), tile.resolution)
+            if can_clear_tile and None not in signature[5] and \
+                    _same_tile(held.get(key), signature):
+                continue
+            stale.append((tile, visible, key, signature))
+        if not self.skip_gpu_calls:
+            SHADOW_TILES["skipped"] += len(plan.tiles) - len(stale)
+            SHADOW_TILES["drawn"] += len(stale)
+        self.shadow_tiles = {"drawn": len(stale), "skipped": len(plan.tiles) - len(stale)}
         with atlas_fb.bind():
-            self._gpu_call(atlas_fb.clear, depth=1.0)
+            if not can_clear_tile:
+                self._gpu_call(atlas_fb.clear, depth=1.0)
             gpu.state.depth_test_set('LESS_EQUAL')
             gpu.state.depth_mask_set(True)
-            gpu.state.face_culling_set('FRONT' if snap.settings.cull_front_faces else 'NONE')
-            for tile in plan.tiles:
+            gpu.state.face_culling_set('FRONT' if cull_front else 'NONE')
+            for tile, visible, key, signature in stale:
                 gpu.state.viewport_set(tile.origin[0], tile.origin[1],
                                        tile.resolution, tile.resolution)
-                visible = self._cull(snap.instances, bounds_lo_hi, tile)
-                if len(visible) == 0:
-                    continue
-                clip_from_objects = _column_major_stack(
-                    tile.clip_from_world @ world_from_objects[visible])
-                for masked in (False, True):
-                    shadow = library.get("shadow_masked" if masked else "shadow")
-                    shadow.bind()
-                    for row, index in enumerate(visible):
-                        draws = items[index][masked]
-                        if not draws:
-                            continue
-                        shadow.uniform_float("clip_from_object", clip_from_objects[row])
-                        for batch, texture, color, params in draws:
-                            if masked:   # the opaque program has no material inputs
-                                shadow.uniform_float("material_params",
-                                                     (0.0, color[3], params[2], params[3]))
-                                shadow.uniform_sampler("base_color_texture", texture)
-                            self._gpu_call(batch.draw, shadow)
+                # NOTE: a clear honours the scissor box, not the viewport: without it the
+                # whole atlas (the other tiles too) would be cleared.
+                if can_clear_tile:
+                    gpu.state.scissor_test_set(True)
+                    gpu.state.scissor_set(tile.origin[0], tile.origin[1],
+                                          tile.resolution, tile.resolution)
+                    self._gpu_call(atlas_fb.clear, depth=1.0)
+                    gpu.state.scissor_test_set(False)
+                if not self.skip_gpu_calls:
+                    # Forget the tile's contents while it is redrawn: if drawing raises,
+                    # the next frame draws it again.
+                    held.pop(key, None)
+                if len(visible):
+                    self._draw_casters(library, items, world_from_objects, tile, visible)
+                if not self.skip_gpu_calls:
+                    held[key] = signature
             gpu.state.face_culling_set('NONE')
         t = self._sync(atlas_fb, "shadow", t)
 
@@ -267,6 +307,53 @@ class Pipeline:
         self.gbuffer_fb = gbuffer_fb
         self.timings["total"] = time.perf_counter() - start
         return plan
+
+    def _draw_casters(self, library, items, world_from_objects, tile, visible):
+        clip_from_objects = _column_major_stack(tile.clip_from_world @
+                                                world_from_objects[visible])
+        for masked in (False, True):
+            shadow = library.get("shadow_masked" if masked else "shadow")
+            shadow.bind()
+            for row, index in enumerate(visible):
+                draws = items[index][masked]
+                if not draws:
+                    continue
+                shadow.uniform_float("clip_from_object", clip_from_objects[row])
+                for batch, texture, color, params in draws:
+                    if masked:   # the opaque program has no material inputs
+                        shadow.uniform_float("material_params",
+                                             (0.0, color[3], params[2], params[3]))
+                        shadow.uniform_sampler("base_color_texture", texture)
+                    self._gpu_call(batch.draw, shadow)
+
+    def _atlas_contents(self, atlas):
+        """What each tile of ``atlas`` holds: (origin, resolution) -> the signature it was
+        drawn with. Kept beside the atlas texture (final renders share it between
+        renders), and forgotten when the texture is reallocated."""
+        held = self._textures.get("atlas_contents")
+        if held is None or held[0] is not atlas:
+            held = (atlas, {})
+            self._textures["atlas_contents"] = held
+        return held[1]
+
+    @staticmethod
+    def _caster_signatures(snap, cache, items):
+        """Per instance, what its shadow depends on besides its matrix: the geometry
+        (``GPUMesh.serial``, never reused, unlike ``id()``) and the alpha-masked draws'
+        cut-out inputs. A masked draw with an image texture gives None, which never equals
+        a held signature: the image may have been edited in place."""
+        per_key = {}
+        signatures = []
+        for instance, (_opaque, masked) in zip(snap.instances, items):
+            if instance.key not in per_key:
+                mesh = cache.meshes.get(instance.key)
+                signature = (mesh.serial if mesh is not None else 0,
+                             tuple((color[3], params[2]) for _b, _t, color, params in masked))
+                if any(params[3] > 0.0 for _b, _t, _c, params in masked):
+                    signature = None
+                per_key[instance.key] = signature
+            signatures.append(per_key[instance.key])
+        return signatures
 
     def _gpu_call(self, call, *args, **kwargs):
         """Every draw and clear of a frame goes through here, so that the benchmark can
@@ -340,11 +427,23 @@ class Pipeline:
         batch.draw(shader)
 
     # -- read-back for final renders -----------------------------------------------------
-    def render_offscreen(self, snap, cache, with_positions=False, with_normals=True):
-        """Draw into offscreen float targets and read back (combined, aux, normal, and the
-        G-buffer's world positions when asked: tests ray-cast from them)."""
+    # What each image is read from: (target, colour slot); the G-buffer's normal target is
+    # the pipeline's own, the other two the final target's.
+    READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("gbuffer", 1)}
+
+    def render_offscreen(self, snap, cache, reads=None, with_positions=False):
+        """Draw into offscreen float targets and read back only what ``reads`` names:
+        image name ("combined", "aux", "normal") -> channels (1..4, from the first;
+        default: combined and aux, RGBA). Each image is one read into a new buffer that the
+        returned (H, W, channels) float32 array views, without another copy. With
+        ``with_positions`` the G-buffer's world positions are added as "position" (tests
+        ray-cast from them; needs "aux" with 4 channels)."""
         import gpu
         width, height = snap.camera.width, snap.camera.height
+        if reads is None:
+            reads = {"combined": 4, "aux": 4}
+        if with_positions:
+            reads = dict(reads, aux=4)
         color = self._texture("final_color", (width, height), 'RGBA32F')
         aux = self._texture("final_aux", (width, height), 'RGBA32F')
         target = self._framebuffer("final", colors=(color, aux))
@@ -353,15 +452,14 @@ class Pipeline:
         plan = self.draw(snap, cache, target, width, height)
         t = time.perf_counter()
         out = {}
-        count = width * height * 4
-        reads = [("combined", target, 0), ("aux", target, 1)]
-        if with_normals or with_positions:
-            reads.append(("normal", self.gbuffer_fb, 1))
-        for name, fb, slot in reads:
-            buffer = gpu.types.Buffer('FLOAT', count)
+        for name, channels in reads.items():
+            source, slot = self.READS[name]
+            fb = target if source == "final" else self.gbuffer_fb
+            buffer = gpu.types.Buffer('FLOAT', width * height * channels)
             with fb.bind():
-                fb.read_color(0, 0, width, height, 4, slot, 'FLOAT', data=buffer)
-            out[name] = np.frombuffer(buffer, dtype=np.float32).reshape(height, width, 4).copy()
+                fb.read_color(0, 0, width, height, channels, slot, 'FLOAT', data=buffer)
+            out[name] = np.frombuffer(buffer, dtype=np.float32).reshape(
+                height, width, channels)
         if with_positions:
             # xyz = world position, w = coverage (1 on geometry), as tests ray-cast from it.
             aux = out["aux"]

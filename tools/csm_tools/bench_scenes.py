@@ -45,31 +45,35 @@ def add_world(scene):
     return world
 
 
-def subdivided_monkey(level):
-    """One Suzanne mesh with ``level`` subdivisions applied (968 * 4**level triangles)."""
+def subdivided_monkey(level, live=False):
+    """One Suzanne mesh with ``level`` subdivisions (968 * 4**level triangles): applied,
+    or with ``live`` a Subdivision modifier left on the object (Blender evaluates it for
+    every render, as in a user's scene)."""
     import bpy
     bpy.ops.mesh.primitive_monkey_add(size=2.0)
     obj = bpy.context.object
     modifier = obj.modifiers.new("subdivide", 'SUBSURF')
     modifier.levels = level
     modifier.render_levels = level
-    bpy.ops.object.modifier_apply(modifier=modifier.name)
+    if not live:
+        bpy.ops.object.modifier_apply(modifier=modifier.name)
     if hasattr(obj.data, "shade_smooth"):      # 4.1+; older meshes keep flat normals
         obj.data.shade_smooth()
     return obj
 
 
-def build_field_scene(monkeys, level=2, share_mesh=False):
+def build_field_scene(monkeys, level=2, share_mesh=False, live=False):
     """Suzannes on a square grid over a ground plane, a sun and a camera seeing them all.
 
     Deterministic: positions and rotations come from the grid index only. With
     ``share_mesh`` every monkey links one mesh (scaling sweeps); otherwise each has its own
-    copy, like separately modelled objects, so editing one uploads one.
+    copy, like separately modelled objects, so editing one uploads one. With ``live`` the
+    Subdivision modifier stays on every object (not applied).
     """
     import bpy
     from csm_engine.blender import cli
     scene = cli.open_scene()
-    template = subdivided_monkey(level)
+    template = subdivided_monkey(level, live)
     side = max(int(math.ceil(math.sqrt(monkeys))), 1)
     spacing = 3.0
     extent = side * spacing
@@ -77,6 +81,9 @@ def build_field_scene(monkeys, level=2, share_mesh=False):
     for index in range(1, monkeys):
         data = template.data if share_mesh else template.data.copy()
         obj = bpy.data.objects.new(f"Suzanne.{index:04d}", data)
+        if live:
+            modifier = obj.modifiers.new("subdivide", 'SUBSURF')
+            modifier.levels = modifier.render_levels = level
         scene.collection.objects.link(obj)
         objects.append(obj)
     for index, obj in enumerate(objects):
@@ -97,6 +104,18 @@ def build_field_scene(monkeys, level=2, share_mesh=False):
     scene.camera = camera
     add_world(scene)
     return scene
+
+
+def animate_one_object(scene, frames):
+    """Key the first Suzanne rising 2 m over ``frames`` frames (frame_start=1); the rest
+    of the scene stays still."""
+    obj = next(o for o in scene.objects if o.name.startswith("Suzanne"))
+    scene.frame_start, scene.frame_end = 1, frames
+    obj.keyframe_insert("location", frame=1)
+    obj.location.z += 2.0
+    obj.keyframe_insert("location", frame=frames)
+    scene.frame_set(1)
+    return obj
 
 
 def scene_triangles(scene):

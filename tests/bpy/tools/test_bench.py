@@ -66,3 +66,21 @@ def test_a_bad_resolution_is_one_clear_message(tmp_path):
     assert proc.returncode == 2
     assert "--resolution" in proc.stderr and "wide" in proc.stderr
     assert "Traceback" not in proc.stderr
+
+
+def test_live_modifier_scene_reports_first_and_repeated_renders_and_animation(tmp_path):
+    out = tmp_path / "bench.json"
+    proc = run_module("bench", "--quick", "--scenes", "field-live", "instances",
+                      "--no-scaling", "--json", out, cwd=tmp_path, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    results = json.loads(out.read_text())
+    assert [s["name"] for s in results["scenes"]] == ["field-live", "instances"]
+    for scene in results["scenes"]:
+        # The first render reads every mesh; the repeated ones are the median that follows.
+        assert scene["csm"]["warmup_s"] > 0 and scene["first_ratio"] > 0
+        assert scene["viewport"]["camera_only_uploads"] == 0
+    animation = results["animation"]
+    assert animation["frames"] >= 2 and len(animation["csm"]["frames_s"]) == \
+        animation["frames"] - 1
+    assert animation["ratio"] == animation["eevee"]["median_s"] / animation["csm"]["median_s"]
+    assert len(results["load_average"]) == 3

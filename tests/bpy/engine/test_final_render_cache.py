@@ -1,0 +1,155 @@
+"""Final renders keep their GPU meshes: a re-render uploads only what changed, and never
+shows stale geometry.
+
+Each render gets a new depsgraph, so the final-render mesh cache (``engine``'s
+``_FINAL_RENDER_MESHES``) decides from the meshes themselves: an unchanged object is not
+even read (``mesh_cache.recipe``), a changed one is read, hashed and uploaded when its
+contents are new. Every edit a user makes between two F12s must change the pixels as it
+should; an unchanged re-render uploads nothing.
+"""
+import bpy
+import numpy as np
+
+from csm_engine.blender import engine
+from csm_engine.render import gpu_mesh, pipeline
+from tests.bpy.bpy_helpers import render_result
+
+W, H = 96, 64
+
+
+def _scene(empty_scene):
+    scene = empty_scene
+    bpy.ops.mesh.primitive_plane_add(size=12)
+    bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1.2))
+    cube = bpy.context.object
+    subsurf = cube.modifiers.new("subdivide", 'SUBSURF')
+    subsurf.levels = subsurf.render_levels = 1
+    material = bpy.data.materials.new("cube")
+    _set_colour(material, (0.8, 0.2, 0.2))
+    cube.data.materials.append(material)
+    bpy.ops.object.light_add(type='SUN', rotation=(np.radians(35), np.radians(25), 0))
+    bpy.ops.object.camera_add(location=(7, -7, 5),
+                              rotation=(np.radians(63), 0, np.radians(45)))
+    scene.camera = bpy.context.object
+    return scene, cube
+
+
+def _set_colour(material, rgb):
+    material.diffuse_color = (*rgb, 1.0)
+    for node in (material.node_tree.nodes if material.node_tree else ()):
+        if node.type == 'BSDF_PRINCIPLED':
+            node.inputs["Base Color"].default_value = (*rgb, 1.0)
+
+
+def _render(scene):
+    before = gpu_mesh.UPLOADS["count"]
+    result = render_result(scene, W, H)
+    return result.images["combined"].copy(), gpu_mesh.UPLOADS["count"] - before
+
+
+def _changed(a, b):
+    return float(np.abs(a - b).max())
+
+
+def test_unchanged_rerender_uploads_nothing_and_draws_no_shadow_tile(empty_scene):
+    scene, cube = _scene(empty_scene)
+    first, _ = _render(scene)
+    tiles = dict(pipeline.SHADOW_TILES)
+    again, uploads = _render(scene)
+    assert uploads == 0
+    assert pipeline.SHADOW_TILES["drawn"] == tiles["drawn"]
+    assert pipeline.SHADOW_TILES["skipped"] > tiles["skipped"]
+    assert _changed(first, again) == 0.0
+    cache = engine._final_mesh_cache()
+    assert cache.last_sync["read"] == 0 and cache.last_sync["uploaded"] == 0
+
+
+def test_moving_a_vertex_changes_the_pixels(empty_scene):
+    scene, cube = _scene(empty_scene)
+    before, _ = _render(scene)
+    top = max(cube.data.vertices, key=lambda v: v.co.z)
+    top.co.z += 1.5
+    cube.data.update()
+    after, uploads = _render(scene)
+    assert uploads == 1
+    assert _changed(before, after) > 0.1
+
+
+def test_modifier_edits_change_the_pixels(empty_scene):
+    scene, cube = _scene(empty_scene)
+    level1, _ = _render(scene)
+    cube.modifiers["subdivide"].render_levels = 3
+    level3, uploads = _render(scene)
+    assert uploads == 1 and _changed(level1, level3) > 0.02
+    array = cube.modifiers.new("array", 'ARRAY')
+    array.relative_offset_displace = (1.5, 0, 0)
+    arrayed, uploads = _render(scene)
+    assert uploads == 1 and _changed(level3, arrayed) > 0.1
+    array.show_render = False
+    hidden, uploads = _render(scene)
+    assert uploads == 0                      # the level-3 mesh is still on the GPU
+    assert _changed(level3, hidden) == 0.0
+
+
+def test_material_colour_and_transform_change_the_pixels_without_uploads(empty_scene):
+    scene, cube = _scene(empty_scene)
+    red, _ = _render(scene)
+    _set_colour(cube.data.materials[0], (0.1, 0.2, 0.9))
+    blue, uploads = _render(scene)
+    assert uploads == 0
+    assert _changed(red, blue) > 0.1
+    cube.location.x += 1.0
+    moved, uploads = _render(scene)
+    assert uploads == 0
+    assert _changed(blue, moved) > 0.1
+
+
+def test_animated_shape_key_changes_the_pixels_per_frame(empty_scene):
+    scene, cube = _scene(empty_scene)
+    cube.shape_key_add(name="Basis")
+    tall = cube.shape_key_add(name="tall")
+    for point in tall.data:
+        if point.co.z > 0:
+            point.co.z += 2.0
+    tall.value = 0.0
+    tall.keyframe_insert("value", frame=1)
+    tall.value = 1.0
+    tall.keyframe_insert("value", frame=10)
+    images = []
+    for frame in (1, 10, 1):
+        scene.frame_set(frame)
+        images.append(_render(scene))
+    assert _changed(images[0][0], images[1][0]) > 0.1
+    assert _changed(images[0][0], images[2][0]) == 0.0
+    assert images[2][1] == 0                 # frame 1's mesh is hashed, not uploaded again
+
+
+def test_animation_render_draws_each_frame(empty_scene, tmp_path):
+    """bpy.ops.render.render(animation=True), with one object moving by keyframes."""
+    scene, cube = _scene(empty_scene)
+    cube.location = (0, 0, 1.2)
+    cube.keyframe_insert("location", frame=1)
+    cube.location = (0, 0, 4.0)
+    cube.keyframe_insert("location", frame=3)
+    scene.frame_start, scene.frame_end = 1, 3
+    scene.render.resolution_x, scene.render.resolution_y = W, H
+    scene.render.filepath = str(tmp_path / "frame_")
+    scene.render.image_settings.file_format = 'PNG'
+    before = gpu_mesh.UPLOADS["count"]
+    bpy.ops.render.render(animation=True)
+    from tests.bpy.bpy_helpers import load_png
+    frames = [load_png(tmp_path / f"frame_{n:04d}.png") for n in (1, 2, 3)]
+    assert _changed(frames[0], frames[1]) > 0.05 and _changed(frames[1], frames[2]) > 0.05
+    assert gpu_mesh.UPLOADS["count"] - before <= 2     # plane and cube, once
+
+
+def test_objects_sharing_a_mesh_upload_it_once(empty_scene):
+    scene, cube = _scene(empty_scene)
+    for index in range(5):
+        twin = cube.copy()                   # same mesh, same modifiers
+        twin.location.x = -4.0 + 2.0 * index
+        twin.location.y = 3.0
+        scene.collection.objects.link(twin)
+    engine._final_mesh_cache().clear()
+    _, uploads = _render(scene)
+    assert uploads == 2                      # the plane and one subdivided cube
