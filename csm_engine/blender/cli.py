@@ -7,7 +7,10 @@ user mistake ends with one line on stderr and a non-zero exit code, never a trac
 
 import argparse
 import os
+import re
 import sys
+
+from ..core.captured_output import CapturedOutput
 
 EXIT_USAGE = 2
 EXIT_SCENE = 3
@@ -192,6 +195,20 @@ def write_render_png(scene, path):
             os.remove(temporary)
 
 
+# What Blender and the GL driver print during a render that says nothing to the user of
+# a command line: EGL's start-up complaints (harmless with llvmpipe and headless EGL), its
+# surfaceless fallback notice and Blender's per-stage "Fra:1 Mem:..." lines.
+NOISE = re.compile(r"^(EGL Error \(0x[0-9a-fA-F]+\)|Managed to successfully fallback to "
+                   r"surfaceless EGL|Fra:\d+ Mem:)")
+
+
+def pass_through(text):
+    """Print what a render printed, without the lines in NOISE."""
+    for line in text.splitlines():
+        if line.strip() and not NOISE.match(line):
+            print(line, file=sys.stderr)
+
+
 def run(argv, prog="python -m csm_engine"):
     parser = build_parser(prog)
     args = parser.parse_args(argv)
@@ -208,7 +225,9 @@ def run(argv, prog="python -m csm_engine"):
     render.engine = "CSM"
     render.image_settings.file_format = 'PNG'
     render.image_settings.color_mode = 'RGBA' if render.film_transparent else 'RGB'
-    result = engine.render_final(scene)
+    with CapturedOutput() as captured:
+        result = engine.render_final(scene)
+    pass_through(captured.text)
     if result.error:
         raise CLIError("render failed: " + result.error, EXIT_RENDER)
     write_render_png(scene, shot)

@@ -17,9 +17,9 @@ compiled: on an error the last good shaders keep running and ``last_error`` says
 import os
 import re
 import sys
-import tempfile
 
 from ..core import paths
+from ..core.captured_output import CapturedOutput
 from ..core.frame_layout import FRAME_LAYOUT, glsl_defines
 
 # --------------------------------------------------------------------------------------
@@ -152,31 +152,6 @@ def _error_lines(log):
     return errors
 
 
-class _CapturedOutput:
-    """Capture what the GL driver and Blender print to stdout/stderr at the fd level."""
-
-    def __enter__(self):
-        sys.stdout.flush()
-        sys.stderr.flush()
-        self._file = tempfile.TemporaryFile(mode="w+b")
-        self._saved = (os.dup(1), os.dup(2))
-        os.dup2(self._file.fileno(), 1)
-        os.dup2(self._file.fileno(), 2)
-        return self
-
-    def __exit__(self, *exc):
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os.dup2(self._saved[0], 1)
-        os.dup2(self._saved[1], 2)
-        os.close(self._saved[0])
-        os.close(self._saved[1])
-        self._file.seek(0)
-        self.text = self._file.read().decode("utf-8", "replace")
-        self._file.close()
-        return False
-
-
 def _build(program_name, spec, directory):
     import gpu
 
@@ -206,7 +181,7 @@ def _build(program_name, spec, directory):
     info.vertex_source(vertex)
     info.fragment_source(fragment)
 
-    with _CapturedOutput() as captured:
+    with CapturedOutput() as captured:
         try:
             shader = gpu.shader.create_from_info(info)
             failed = None

@@ -147,3 +147,28 @@ def test_an_unwritable_folder_is_one_line_and_exit_5(tmp_path):
     assert result.returncode == 5, result.stderr
     error = _only_error(result)
     assert "/proc/csm_shot.png" in error
+
+
+def test_a_successful_run_prints_one_line_and_nothing_else(tmp_path):
+    """No importer chatter, no EGL start-up complaints, no 'Fra: Mem' stats, no
+    'Not freed memory blocks' at exit: the user's terminal shows only what concerns them."""
+    shot = tmp_path / "quiet.png"
+    result = run_cli([DEFAULT_SCENE, str(shot), "--resolution", "64x36"], cwd=tmp_path)
+    assert result.returncode == 0, result.stderr
+    lines = [line for line in (result.stdout + result.stderr).splitlines() if line.strip()]
+    assert lines == [f"csm: wrote {shot} (64x36)"], lines
+
+
+def test_the_blender_34_bridge_is_quiet_too(tmp_path):
+    blender = os.environ.get("CSM_BLENDER") or shutil.which("blender")
+    assert blender, "Debian's blender (3.4) is required: apt-get install blender"
+    shot = tmp_path / "quiet.png"
+    result = subprocess.run(
+        [blender, "-b", "--factory-startup", "-P",
+         os.path.join(REPO, "csm_engine", "blender_cli.py"), "--",
+         DEFAULT_SCENE, str(shot), "--resolution", "64x36"],
+        capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    lines = [line for line in (result.stdout + result.stderr).splitlines() if line.strip()]
+    # Blender prints its own version banner before any script runs.
+    assert lines == ["Blender 3.4.1", f"csm: wrote {shot} (64x36)"], lines
