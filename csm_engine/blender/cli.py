@@ -197,9 +197,10 @@ def write_render_png(scene, path):
 
 # What Blender and the GL driver print during a render that says nothing to the user of
 # a command line: EGL's start-up complaints (harmless with llvmpipe and headless EGL), its
-# surfaceless fallback notice and Blender's per-stage "Fra:1 Mem:..." lines.
+# surfaceless fallback notice, Blender's per-stage "Fra:1 Mem:..." lines, and the engine's
+# own reports, which this command prints itself as "csm: error:" / "csm: warning:".
 NOISE = re.compile(r"^(EGL Error \(0x[0-9a-fA-F]+\)|Managed to successfully fallback to "
-                   r"surfaceless EGL|Fra:\d+ Mem:)")
+                   r"surfaceless EGL|Fra:\d+ Mem:|(Error|Warning): CSM: )")
 
 
 def pass_through(text):

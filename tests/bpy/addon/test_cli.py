@@ -172,3 +172,23 @@ def test_the_blender_34_bridge_is_quiet_too(tmp_path):
     lines = [line for line in (result.stdout + result.stderr).splitlines() if line.strip()]
     # Blender prints its own version banner before any script runs.
     assert lines == ["Blender 3.4.1", f"csm: wrote {shot} (64x36)"], lines
+
+
+def test_a_failed_render_is_one_line_exit_4_and_no_file(tmp_path):
+    """A render that cannot run (here: a shader file saved in another encoding in a copy
+    of the package) is one line naming the file, exit 4, and no PNG, old or new."""
+    package = tmp_path / "pkg"
+    shutil.copytree(os.path.join(REPO, "csm_engine"), package / "csm_engine",
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    lighting = package / "csm_engine" / "shaders" / "lighting_frag.glsl"
+    lighting.write_bytes(lighting.read_bytes().replace(b"/*", b"/* \xff", 1))
+    shot = tmp_path / "never.png"
+    env = dict(os.environ, PYTHONPATH=str(package))
+    result = subprocess.run([sys.executable, "-m", "csm_engine", DEFAULT_SCENE, str(shot),
+                             "--resolution", "64x36"], cwd=tmp_path, env=env,
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 4, result.stderr
+    lines = [line for line in (result.stdout + result.stderr).splitlines() if line.strip()]
+    assert len(lines) == 1 and lines[0].startswith("csm: error: render failed:"), lines
+    assert "lighting_frag.glsl:1: not UTF-8" in lines[0], lines
+    assert not shot.exists()
