@@ -20,7 +20,8 @@ What is required: ``objects`` (a list, possibly empty), each object's ``mesh``, 
 camera's ``near``, ``far`` and ``FOVy``, each point light's ``position`` and ``radius``
 and the sun's ``direction``. Numbers must be finite (JSON's NaN/Infinity extensions are
 rejected), scales non-zero, colours non-negative, the sun direction non-zero,
-``0 < near < far``, ``0 < FOVy < 180`` degrees and point-light radii positive.
+``0 < near < far``, ``0 < FOVy < 180`` degrees (and within Blender's camera range,
+``CAMERA_FOV_RANGE_DEGREES``) and point-light radii positive.
 """
 
 from __future__ import annotations
@@ -45,6 +46,11 @@ class SceneFormatError(ValueError):
         self.detail = detail
         where = f"{self.source}: {path}: " if path else f"{self.source}: "
         super().__init__(_one_line(where + detail))
+
+
+# Blender's camera field of view limits (Camera.angle_y is 0.0064 to 3.0167 radians); a
+# value past them gives a degenerate projection rather than a clamped one.
+CAMERA_FOV_RANGE_DEGREES = (0.367, 172.8)
 
 
 @dataclass(frozen=True)
@@ -244,6 +250,10 @@ def _read_camera(reader, value, path):
                                         f"got {_shown(far)}")
     if not 0.0 < fov < 180.0:
         reader.fail(_join(path, "FOVy"), f"must be between 0 and 180 degrees, got {_shown(fov)}")
+    low, high = CAMERA_FOV_RANGE_DEGREES
+    if not low <= fov <= high:
+        reader.fail(_join(path, "FOVy"), f"{_shown(fov)} degrees is outside what a Blender "
+                                         f"camera can show ({low:g} to {high:g} degrees)")
     return Camera(translate=translate, rotate=rotate, near=near, far=far, fov_y_degrees=fov)
 
 

@@ -377,3 +377,13 @@ def test_a_folder_is_not_a_mesh(project):
     with pytest.raises(SceneFormatError):
         scene_format.resolve_mesh_path("dir.obj", scene, cwd=scene.parent)
 
+
+
+@pytest.mark.parametrize("fov", [179.9999999, 1e-300, 172.9, 0.3])
+def test_a_field_of_view_past_blenders_camera_is_refused_by_name(fov):
+    text = ('{"camera": {"translate": {"x": 0, "y": 0, "z": 0}, "rotate": {"x": 0, "y": 0, '
+            '"z": 0}, "near": 0.1, "far": 100, "FOVy": %r}, "objects": []}' % fov)
+    with pytest.raises(SceneFormatError) as failure:
+        parse_scene(text, "wide.json")
+    message = str(failure.value)
+    assert "camera.FOVy" in message and "Blender camera" in message, message
