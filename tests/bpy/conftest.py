@@ -3,8 +3,6 @@
 Helpers here build small scenes and render them with CSM, returning numpy images, so each
 test reads like what a user would check by eye.
 """
-import os
-import sys
 
 import bpy
 import pytest
@@ -22,9 +20,8 @@ def pytest_unconfigure(config):
     # turn the suite's exit code into 139; leave with pytest's own code once it has printed
     # everything (see csm_engine.blender.compat.exit_process). 5.0 shuts down cleanly.
     if bpy.app.version < (5, 0, 0) and "code" in _EXIT_STATUS:
-        sys.stdout.flush()
-        sys.stderr.flush()
-        os._exit(_EXIT_STATUS["code"])
+        from csm_engine.blender.compat import exit_process
+        exit_process(_EXIT_STATUS["code"])
 
 
 @pytest.fixture(scope="session", autouse=True)
