@@ -384,8 +384,14 @@ def _remove_import(collection):
     objects = list(collection.all_objects)
     removed_names = {}
     collection_pointers = {c.as_pointer() for c in collections}
-    only_here = [obj for obj in objects
-                 if all(c.as_pointer() in collection_pointers for c in obj.users_collection)]
+    # NOTE: Object.users_collection scans every collection in Python per object, which is
+    # quadratic for a big import; one pass over the other collections is linear.
+    elsewhere = set()
+    others = [c for c in bpy.data.collections if c.as_pointer() not in collection_pointers]
+    others += [s.collection for s in bpy.data.scenes]
+    for other in others:
+        elsewhere.update(obj.as_pointer() for obj in other.objects)
+    only_here = [obj for obj in objects if obj.as_pointer() not in elsewhere]
     only_here_pointers = {obj.as_pointer() for obj in only_here}
     data = [obj.data for obj in only_here if obj.data is not None]
     materials, node_groups, images = [], [], []
