@@ -39,7 +39,10 @@ from . import compat
 # file's intensity of one.
 POINT_LIGHT_WATTS = 100.0
 POINT_LIGHT_SOFT_SIZE = 0.1   # metres; small, because the course's lights are points
-SUN_STRENGTH = 1.0            # W/m^2, the file's intensity of one
+# W/m^2 for the file's sun intensity of one: the course lights a surface with
+# intensity * albedo * cos, and Blender's Lambert (EEVEE's and CSM's) gives
+# strength * albedo / pi * cos, so one is pi W/m^2 (docs/lighting.md).
+SUN_STRENGTH = math.pi
 DEFAULT_CAMERA_FOV_DEGREES = 40.0
 
 # Datablock kinds an importer may create; all are compared before/after for rollback.

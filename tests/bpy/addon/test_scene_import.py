@@ -266,7 +266,8 @@ def test_default_scene(scene):
     assert [o.type for o in collection.all_objects].count('MESH') == 1
     assert sorted(o.type for o in collection.all_objects) == ['CAMERA', 'EMPTY', 'LIGHT', 'MESH']
     sun = objects_of(collection, 'LIGHT')[0]
-    assert sun.data.type == 'SUN' and math.isclose(sun.data.energy, 1.0)
+    # The file's intensity 1 is pi W/m^2: Blender's Lambert divides by pi (docs/lighting.md).
+    assert sun.data.type == 'SUN' and math.isclose(sun.data.energy, math.pi, rel_tol=1e-6)
     travel = np.array(sun.matrix_world.to_3x3()) @ (0, 0, -1)
     expected = C[:3, :3] @ (np.array([0.3, -0.6, -0.7]) / np.linalg.norm([0.3, -0.6, -0.7]))
     assert np.allclose(travel, expected, atol=1e-5)
