@@ -19,12 +19,29 @@ float shadow_linear_depth(float window_depth, ShadowTileData tile)
   return near + window_depth * (far - near);
 }
 
-float shadow_tap(ShadowTileData tile, vec2 texel, float receiver, float bias)
+/* The inverse of shadow_linear_depth: the window depth 0..1 of a distance from the light.
+ * Both are increasing, so "occluder closer than the biased receiver" can be tested on the
+ * stored window depths directly. Distances at or behind a perspective light's position
+ * give -1 (nothing can be in front of them). */
+float shadow_window_depth(float linear, ShadowTileData tile)
 {
-  ivec2 p = ivec2(clamp(floor(texel), vec2(0.0), vec2(tile.resolution - 1.0))) +
-            ivec2(tile.atlas_origin);
-  float occluder = shadow_linear_depth(texelFetch(shadow_atlas, p, 0).r, tile);
-  return (receiver - bias > occluder) ? 0.0 : 1.0;
+  float near = tile.light_near, far = tile.light_far;
+  if (tile.is_perspective != 0) {
+    if (linear <= 1e-6) {
+      return -1.0;
+    }
+    return 0.5 * (far + near - 2.0 * near * far / linear) / (far - near) + 0.5;
+  }
+  return (linear - near) / (far - near);
+}
+
+/* One PCF tap: 1 lit, 0 shadowed. NOTE: the receiver's biased depth is converted to the
+ * atlas's window depth once per pixel (compare_window), so a tap is one fetch and one
+ * compare, with no per-tap linearization (the lighting pass is fill-bound on llvmpipe). */
+float shadow_tap(vec2 origin, float last_texel, vec2 texel, float compare_window)
+{
+  ivec2 p = ivec2(clamp(floor(texel), vec2(0.0), vec2(last_texel))) + ivec2(origin);
+  return texelFetch(shadow_atlas, p, 0).r < compare_window ? 0.0 : 1.0;
 }
 
 /* Visibility (1 lit, 0 shadowed) of world point p with normal n from shadow tile t. */
@@ -53,12 +70,15 @@ float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l)
     return 1.0; /* Outside the tile: nothing was rendered there to cast a shadow. */
   }
   float receiver = shadow_linear_depth(max(s.z, 0.0), tile);
+  float compare = shadow_window_depth(receiver - bias, tile);
+  vec2 origin = tile.atlas_origin;
+  float last_texel = tile.resolution - 1.0;
   vec2 texel = s.xy * tile.resolution;
 
   int radius = int(pcf_radius);
   int pattern = frame.pcf_pattern;
   if (radius == 0) {
-    return shadow_tap(tile, texel, receiver, bias);
+    return shadow_tap(origin, last_texel, texel, compare);
   }
   float lit = 0.0;
   float taps = 0.0;
@@ -75,24 +95,24 @@ float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l)
       for (int x = 0; x <= last; x++) {
         float wx = (x == 0) ? 1.0 - f.x : ((x == last) ? f.x : 1.0);
         vec2 center = base + vec2(float(x - radius), float(y - radius)) + 0.5;
-        lit += wx * wy * shadow_tap(tile, center, receiver, bias);
+        lit += wx * wy * shadow_tap(origin, last_texel, center, compare);
       }
     }
     taps = float(last * last);
   }
   else {
     float r = float(radius);
-    lit = shadow_tap(tile, texel, receiver, bias);
-    lit += shadow_tap(tile, texel + vec2(r, 0.0), receiver, bias);
-    lit += shadow_tap(tile, texel + vec2(-r, 0.0), receiver, bias);
-    lit += shadow_tap(tile, texel + vec2(0.0, r), receiver, bias);
-    lit += shadow_tap(tile, texel + vec2(0.0, -r), receiver, bias);
+    lit = shadow_tap(origin, last_texel, texel, compare);
+    lit += shadow_tap(origin, last_texel, texel + vec2(r, 0.0), compare);
+    lit += shadow_tap(origin, last_texel, texel + vec2(-r, 0.0), compare);
+    lit += shadow_tap(origin, last_texel, texel + vec2(0.0, r), compare);
+    lit += shadow_tap(origin, last_texel, texel + vec2(0.0, -r), compare);
     taps = 5.0;
     if (pattern == PCF_NINE_TAP) {
-      lit += shadow_tap(tile, texel + vec2(r, r), receiver, bias);
-      lit += shadow_tap(tile, texel + vec2(-r, r), receiver, bias);
-      lit += shadow_tap(tile, texel + vec2(r, -r), receiver, bias);
-      lit += shadow_tap(tile, texel + vec2(-r, -r), receiver, bias);
+      lit += shadow_tap(origin, last_texel, texel + vec2(r, r), compare);
+      lit += shadow_tap(origin, last_texel, texel + vec2(-r, r), compare);
+      lit += shadow_tap(origin, last_texel, texel + vec2(r, -r), compare);
+      lit += shadow_tap(origin, last_texel, texel + vec2(-r, -r), compare);
       taps = 9.0;
     }
   }
