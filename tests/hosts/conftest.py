@@ -111,6 +111,27 @@ def run_host(command, env, cwd):
     return HostRun(command, completed)
 
 
+HOST_NAMES = ("blender 3.4", "bpy 4.2", "bpy 5.0")
+
+
+def script_command(host, script, *args):
+    """The command that runs a Python ``script`` with ``args`` in one of HOST_NAMES."""
+    if host == "blender 3.4":
+        return [blender_binary(), "-b", "--factory-startup", "--python", script, "--", *args]
+    python = bpy42_python() if host == "bpy 4.2" else bpy50_python()
+    return [python, script, *args]
+
+
+def copy_package(work):
+    """A copy of the checkout's ``csm_engine`` package (shaders and data inside) in
+    ``work``, for host scripts that put ``work`` on sys.path; returns its path."""
+    import shutil
+    target = os.path.join(str(work), "csm_engine")
+    shutil.copytree(os.path.join(REPO, "csm_engine"), target,
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    return target
+
+
 def read_png(path):
     """PNG -> float array (height, width, channels) in 0..1, top row first (the one PNG
     reader, ``csm_tools.report_io``, with no imaging library beyond numpy)."""

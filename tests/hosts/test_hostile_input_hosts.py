@@ -9,15 +9,11 @@ time limit). Also 300 references to one small glTF must import well within the l
 The package is copied from this checkout into the host's working folder.
 """
 
-import json
-import os
-import shutil
 
 import pytest
 
 pytestmark = pytest.mark.hosts
 
-from tests.conftest import REPO
 
 # Runs inside the host. argv (after "--" for blender): working folder. Prints CSM_RESULT.
 HOST_SCRIPT = r'''
@@ -141,21 +137,13 @@ EXPECTED = {
 }
 
 
-def _host_command(hosts, host, script, *args):
-    if host == "blender 3.4":
-        return [hosts.blender_binary(), "-b", "--factory-startup", "--python", script, "--", *args]
-    python = hosts.bpy42_python() if host == "bpy 4.2" else hosts.bpy50_python()
-    return [python, script, *args]
-
-
 @pytest.mark.parametrize("host", ["blender 3.4", "bpy 4.2", "bpy 5.0"])
 def test_hostile_input_is_a_clean_error_on_every_host(hosts, host_dir, host):
     work = host_dir / "work"
-    shutil.copytree(os.path.join(REPO, "csm_engine"), work / "csm_engine",
-                    ignore=shutil.ignore_patterns("__pycache__"))
+    hosts.copy_package(work)
     script = host_dir / "hostile.py"
     script.write_text(HOST_SCRIPT, encoding="utf-8")
-    command = _host_command(hosts, host, str(script), str(work))
+    command = hosts.script_command(host, str(script), str(work))
     run = hosts.run_host(command, hosts.user_dirs_env(str(host_dir)), str(host_dir))
     assert run.returncode == 0 and run.result, run.describe()
     blender = run.result["blender"]

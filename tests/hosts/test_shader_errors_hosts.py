@@ -9,15 +9,12 @@ this checkout into the host's working folder, so no install is needed.
 """
 
 import json
-import os
 import re
-import shutil
 
 import pytest
 
 pytestmark = pytest.mark.hosts
 
-from tests.conftest import REPO
 
 CASES = (("lighting_frag.glsl", "  float broken = ;"),
          ("common.glsl", "  float broken = ;"),
@@ -77,21 +74,13 @@ print("CSM_RESULT " + json.dumps(result), flush=True)
 '''
 
 
-def _host_command(hosts, host, script, *args):
-    if host == "blender 3.4":
-        return [hosts.blender_binary(), "-b", "--factory-startup", "--python", script, "--", *args]
-    python = hosts.bpy42_python() if host == "bpy 4.2" else hosts.bpy50_python()
-    return [python, script, *args]
-
-
 @pytest.mark.parametrize("host", ["blender 3.4", "bpy 4.2", "bpy 5.0"])
 def test_compile_error_names_file_and_line_on_every_host(hosts, host_dir, host):
     work = host_dir / "work"
-    shutil.copytree(os.path.join(REPO, "csm_engine"), work / "csm_engine",
-                    ignore=shutil.ignore_patterns("__pycache__"))
+    hosts.copy_package(work)
     script = host_dir / "probe.py"
     script.write_text(HOST_SCRIPT, encoding="utf-8")
-    command = _host_command(hosts, host, str(script), str(work), json.dumps(CASES))
+    command = hosts.script_command(host, str(script), str(work), json.dumps(CASES))
     run = hosts.run_host(command, hosts.user_dirs_env(str(host_dir)), str(host_dir))
     assert run.returncode == 0 and run.result, run.describe()
     assert run.result["good"] is None, run.result        # the real shaders still compile
