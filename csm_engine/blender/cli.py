@@ -183,6 +183,11 @@ def write_render_png(scene, path):
     except OSError as error:
         raise CLIError(f"cannot write '{path}': {error.strerror}", EXIT_OUTPUT) from None
     try:
+        # mkstemp makes a private (0600) file; the screenshot gets the permissions any
+        # new file of the user's gets.
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(temporary, 0o666 & ~umask)
         image.save_render(temporary, scene=scene)
         if os.path.getsize(temporary) == 0:
             raise CLIError(f"cannot write '{path}': Blender wrote an empty file", EXIT_OUTPUT)

@@ -107,6 +107,9 @@ def test_writes_exactly_the_named_png_and_nothing_else(tmp_path):
     assert result.returncode == 0, result.stderr
     assert sorted(p.name for p in tmp_path.iterdir()) == ["Shot.PNG"]
     assert load_png(str(shot)).shape == (36, 64, 4)
+    umask = os.umask(0)
+    os.umask(umask)
+    assert shot.stat().st_mode & 0o777 == 0o666 & ~umask, oct(shot.stat().st_mode)
 
 
 @pytest.mark.parametrize("name, words", [
