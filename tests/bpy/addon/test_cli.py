@@ -17,6 +17,16 @@ from tests.conftest import REPO
 DEFAULT_SCENE = os.path.join(REPO, "csm_engine", "data", "scenes", "default.json")
 
 
+def run_blender_cli(args, cwd):
+    """``blender -b -P csm_engine/blender_cli.py -- args`` on Debian's Blender 3.4."""
+    blender = os.environ.get("CSM_BLENDER") or shutil.which("blender")
+    assert blender, "Debian's blender (3.4) is required: apt-get install blender"
+    return subprocess.run(
+        [blender, "-b", "--factory-startup", "-P",
+         os.path.join(REPO, "csm_engine", "blender_cli.py"), "--", *args],
+        capture_output=True, text=True, timeout=300, cwd=cwd)
+
+
 def run_cli(args, cwd):
     env = dict(os.environ, PYTHONPATH=REPO)
     return subprocess.run([sys.executable, "-m", "csm_engine", *args], cwd=cwd, env=env,
@@ -75,22 +85,13 @@ def test_user_mistakes_give_one_line_and_a_nonzero_exit(tmp_path, args, code, wo
 
 
 def test_blender_binary_bridge_on_blender_34(tmp_path):
-    blender = os.environ.get("CSM_BLENDER") or shutil.which("blender")
-    assert blender, "Debian's blender (3.4) is required: apt-get install blender"
     shot = tmp_path / "shot.png"
-    result = subprocess.run(
-        [blender, "-b", "--factory-startup", "-P",
-         os.path.join(REPO, "csm_engine", "blender_cli.py"), "--",
-         DEFAULT_SCENE, str(shot), "--resolution", "320x180"],
-        capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    result = run_blender_cli([DEFAULT_SCENE, str(shot), "--resolution", "320x180"], tmp_path)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
     pixels = load_png(str(shot))
     assert pixels.shape == (180, 320, 4)
     assert_lit_landscape(pixels)
-    bad = subprocess.run(
-        [blender, "-b", "--factory-startup", "-P",
-         os.path.join(REPO, "csm_engine", "blender_cli.py"), "--", "nope.json"],
-        capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    bad = run_blender_cli(["nope.json"], tmp_path)
     assert bad.returncode == 3 and "nope.json" in bad.stderr
 
 
@@ -163,14 +164,8 @@ def test_a_successful_run_prints_one_line_and_nothing_else(tmp_path):
 
 
 def test_the_blender_34_bridge_is_quiet_too(tmp_path):
-    blender = os.environ.get("CSM_BLENDER") or shutil.which("blender")
-    assert blender, "Debian's blender (3.4) is required: apt-get install blender"
     shot = tmp_path / "quiet.png"
-    result = subprocess.run(
-        [blender, "-b", "--factory-startup", "-P",
-         os.path.join(REPO, "csm_engine", "blender_cli.py"), "--",
-         DEFAULT_SCENE, str(shot), "--resolution", "64x36"],
-        capture_output=True, text=True, timeout=300, cwd=tmp_path)
+    result = run_blender_cli([DEFAULT_SCENE, str(shot), "--resolution", "64x36"], tmp_path)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
     lines = [line for line in (result.stdout + result.stderr).splitlines() if line.strip()]
     # Blender prints its own version banner before any script runs.

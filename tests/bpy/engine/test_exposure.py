@@ -16,6 +16,7 @@ import pytest
 from mathutils import Vector
 
 from csm_engine.core import paths
+from tests.bpy.engine.test_render import set_world_color
 from tests.bpy.engine.test_shadows import add_box, add_camera, add_ground, add_sun
 
 WIDTH, HEIGHT = 160, 120
@@ -127,17 +128,6 @@ def assert_same_exposure(scene, folder):
 
 # ---- scenes ------------------------------------------------------------------------------
 
-def set_world(scene, rgb):
-    world = scene.world or bpy.data.worlds.new("World")
-    scene.world = world
-    world.color = rgb
-    if world.use_nodes and world.node_tree:
-        for node in world.node_tree.nodes:
-            if node.type == 'BACKGROUND':
-                node.inputs[0].default_value = (*rgb, 1.0)
-                node.inputs[1].default_value = 1.0
-
-
 def principled(name, base=(0.8, 0.8, 0.8), roughness=0.5):
     material = bpy.data.materials.new(name)
     material.use_nodes = True
@@ -164,7 +154,7 @@ def _named(scene, name):
 
 def test_sun_only(empty_scene, tmp_path):
     scene = _named(empty_scene, "sun_only")
-    set_world(scene, (0.0, 0.0, 0.0))
+    set_world_color(scene, (0.0, 0.0, 0.0))
     add_ground(20)
     add_box((0, 0, 1), (1, 1, 1))
     bpy.ops.mesh.primitive_monkey_add(location=(3, 1, 1.2))
@@ -179,7 +169,7 @@ def test_sun_on_white_principled(empty_scene, tmp_path, roughness):
     """A white surface, fully rough and glossy: the normalized specular lobe does not make
     CSM brighter than EEVEE."""
     scene = _named(empty_scene, f"sun_white_roughness_{roughness}")
-    set_world(scene, (0.0, 0.0, 0.0))
+    set_world_color(scene, (0.0, 0.0, 0.0))
     white = principled("white", (1.0, 1.0, 1.0), roughness)
     for obj in (add_ground(20), add_box((0, 0, 1), (1, 1, 1))):
         obj.data.materials.append(white)
@@ -194,7 +184,7 @@ def test_sun_on_white_principled(empty_scene, tmp_path, roughness):
 
 def test_point_light_physical_falloff(empty_scene, tmp_path):
     scene = _named(empty_scene, "point_only")
-    set_world(scene, (0.0, 0.0, 0.0))
+    set_world_color(scene, (0.0, 0.0, 0.0))
     add_ground(20)
     add_box((1.5, 0.5, 0.5), (0.5, 0.5, 0.5))
     add_light('POINT', (0, 0, 2.5), 1000.0, shadow_soft_size=0.05)
@@ -204,7 +194,7 @@ def test_point_light_physical_falloff(empty_scene, tmp_path):
 
 def test_spot_light(empty_scene, tmp_path):
     scene = _named(empty_scene, "spot_only")
-    set_world(scene, (0.0, 0.0, 0.0))
+    set_world_color(scene, (0.0, 0.0, 0.0))
     add_ground(20)
     bpy.ops.mesh.primitive_monkey_add(location=(0, 0, 1))
     add_light('SPOT', (2, -2, 5), 2000.0, target=(0, 0, 0), spot_size=math.radians(60),
@@ -216,7 +206,7 @@ def test_spot_light(empty_scene, tmp_path):
 def test_world_colour_as_ambient(empty_scene, tmp_path):
     """No lamps: a uniform World of radiance L lights a diffuse surface with L * albedo."""
     scene = _named(empty_scene, "world_only")
-    set_world(scene, (0.3, 0.3, 0.3))
+    set_world_color(scene, (0.3, 0.3, 0.3))
     add_ground(20)
     add_box((0, 0, 1), (1, 1, 1))
     add_camera(scene, (7, -7, 6), (0, 0, 0))
@@ -251,7 +241,7 @@ def test_bundled_point_lights_scene_sun_and_sky(tmp_path):
 
 def test_operator_scene_monkey_plane_sun_and_point(empty_scene, tmp_path):
     scene = _named(empty_scene, "monkey_plane_sun_point")
-    set_world(scene, (0.05, 0.05, 0.06))
+    set_world_color(scene, (0.05, 0.05, 0.06))
     bpy.ops.mesh.primitive_plane_add(size=12)
     bpy.ops.mesh.primitive_monkey_add(location=(0, 0, 1.2))
     bpy.ops.object.shade_smooth()
@@ -268,7 +258,7 @@ def test_operator_scene_sphere_grid_spot_and_point(empty_scene, tmp_path):
     light. The area light the scene also has is hidden from both renders: CSM does not draw
     area lights (nor does the course), so EEVEE alone would count it."""
     scene = _named(empty_scene, "sphere_grid")
-    set_world(scene, (0.02, 0.02, 0.02))
+    set_world_color(scene, (0.02, 0.02, 0.02))
     bpy.ops.mesh.primitive_plane_add(size=16)
     colours = [(0.8, 0.8, 0.8), (0.2, 0.5, 0.8), (0.8, 0.6, 0.1)]
     for i in range(3):
@@ -294,7 +284,7 @@ def test_point_light_falls_off_by_the_inverse_square_in_watts(empty_scene):
     under it, at angle theta, sends back albedo / pi * P / (4 pi d^2) * cos(theta)."""
     from tests.bpy.bpy_helpers import render_scene
     scene = empty_scene
-    set_world(scene, (0.0, 0.0, 0.0))
+    set_world_color(scene, (0.0, 0.0, 0.0))
     rough = principled("rough", (0.8, 0.8, 0.8), 1.0)      # no specular lobe in CSM
     add_ground(40).data.materials.append(rough)
     power = 400.0 * math.pi                                 # 100 W/sr
