@@ -132,6 +132,18 @@ def copy_package(work):
     return target
 
 
+def run_script_with_package(host, host_dir, script_text, *args):
+    """Run ``script_text`` in one of HOST_NAMES with a copy of the package in
+    ``host_dir/work`` (its first argument) and throwaway Blender user folders."""
+    work = os.path.join(str(host_dir), "work")
+    copy_package(work)
+    script = os.path.join(str(host_dir), "host_script.py")
+    with open(script, "w", encoding="utf-8") as handle:
+        handle.write(script_text)
+    command = script_command(host, script, work, *args)
+    return run_host(command, user_dirs_env(str(host_dir)), str(host_dir))
+
+
 def read_png(path):
     """PNG -> float array (height, width, channels) in 0..1, top row first (the one PNG
     reader, ``csm_tools.report_io``, with no imaging library beyond numpy)."""

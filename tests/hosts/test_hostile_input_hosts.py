@@ -139,12 +139,7 @@ EXPECTED = {
 
 @pytest.mark.parametrize("host", ["blender 3.4", "bpy 4.2", "bpy 5.0"])
 def test_hostile_input_is_a_clean_error_on_every_host(hosts, host_dir, host):
-    work = host_dir / "work"
-    hosts.copy_package(work)
-    script = host_dir / "hostile.py"
-    script.write_text(HOST_SCRIPT, encoding="utf-8")
-    command = hosts.script_command(host, str(script), str(work))
-    run = hosts.run_host(command, hosts.user_dirs_env(str(host_dir)), str(host_dir))
+    run = hosts.run_script_with_package(host, host_dir, HOST_SCRIPT)
     assert run.returncode == 0 and run.result, run.describe()
     blender = run.result["blender"]
     for name, words in EXPECTED.items():

@@ -76,12 +76,7 @@ print("CSM_RESULT " + json.dumps(result), flush=True)
 
 @pytest.mark.parametrize("host", ["blender 3.4", "bpy 4.2", "bpy 5.0"])
 def test_compile_error_names_file_and_line_on_every_host(hosts, host_dir, host):
-    work = host_dir / "work"
-    hosts.copy_package(work)
-    script = host_dir / "probe.py"
-    script.write_text(HOST_SCRIPT, encoding="utf-8")
-    command = hosts.script_command(host, str(script), str(work), json.dumps(CASES))
-    run = hosts.run_host(command, hosts.user_dirs_env(str(host_dir)), str(host_dir))
+    run = hosts.run_script_with_package(host, host_dir, HOST_SCRIPT, json.dumps(CASES))
     assert run.returncode == 0 and run.result, run.describe()
     assert run.result["good"] is None, run.result        # the real shaders still compile
     assert len(run.result["cases"]) == len(CASES), run.result
