@@ -246,7 +246,8 @@ class CSMRenderEngine(bpy.types.RenderEngine):
             self.cache.sync(snap.mesh_sources)
             snap.mesh_sources = {}
             gpu.state.blend_set('ALPHA_PREMULT' if snap.film_transparent else 'NONE')
-            self.pipeline.draw(snap, self.cache, None, region.width, region.height)
+            self.pipeline.draw_viewport(snap, self.cache, region.width, region.height,
+                                        fxaa=bool(snap.settings.fxaa))
             self._viewport_error = None
         except Exception as error:
             # The viewport shows the reason instead of a stale or half-drawn frame; the

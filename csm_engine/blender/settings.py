@@ -188,6 +188,20 @@ class CSMSettings(bpy.types.PropertyGroup):
         description="How far (scene units) each cascade's near plane is pulled back toward "
                     "the sun, so casters outside the view still cast into it")
 
+    # --- Anti-aliasing ----------------------------------------------------------------------
+    # NOTE: 8 by default: a final render should not show stair steps; each sample costs one
+    # G-buffer and lighting pass (the shadow maps are drawn once per render).
+    render_samples: IntProperty(
+        name="Render Samples", default=8, min=1, max=64, update=_redraw,
+        description="Jittered frames averaged per final render (1 to 64), spread over Film > "
+                    "Filter Size like EEVEE's render samples. More: smoother edges and "
+                    "shadow edges; each sample adds one G-buffer and lighting pass")
+    fxaa: BoolProperty(
+        name="FXAA", default=True, update=_redraw,
+        description="Post-process anti-aliasing (FXAA) in the viewport, and in final renders "
+                    "with 1 render sample: smooths stair steps on edges for one cheap "
+                    "full-screen pass; slightly softens fine texture detail")
+
     # --- Debug --------------------------------------------------------------------------
     debug_view: EnumProperty(
         name="Debug View", items=DEBUG_VIEWS, default='NONE', update=_redraw,

@@ -53,6 +53,13 @@ def draw_occluders(layout, csm):
     sub.prop(csm, "occluder_margin")
 
 
+def draw_antialiasing(layout, context):
+    col = layout.column()
+    col.prop(context.scene.csm, "render_samples")
+    col.prop(context.scene.csm, "fxaa")
+    col.prop(context.scene.render, "filter_size")
+
+
 def draw_debug(layout, csm):
     col = layout.column()
     col.prop(csm, "debug_view")
@@ -121,6 +128,7 @@ GROUPS = (
     ("bias", "Bias", lambda layout, context: draw_bias(layout, context.scene.csm)),
     ("occluders", "Occluders", lambda layout, context: draw_occluders(layout, context.scene.csm)),
     ("light", "Light", draw_light),
+    ("antialiasing", "Anti-Aliasing", draw_antialiasing),
     ("debug", "Debug", lambda layout, context: draw_debug(layout, context.scene.csm)),
     ("scene", "Scene", draw_scene),
 )

@@ -61,6 +61,7 @@ class FrameSnapshot:
     ambient: np.ndarray = field(default_factory=lambda: np.zeros(3))
     background: np.ndarray = field(default_factory=lambda: np.zeros(3))
     film_transparent: bool = False
+    pixel_filter_width: float = 1.5    # Film > Filter Size (pixels): final-render AA spread
     scene_name: str = ""
     warnings: list = field(default_factory=list)      # what the snapshot had to correct
 

@@ -83,6 +83,7 @@ class Pipeline:
         self.profile = False
         self.skip_gpu_calls = False   # benchmark only: a frame of Python without the GPU
         self.gbuffer_fb = None      # kept after draw() for the final render's read-back
+        self._combined_fb = None    # what holds the final Combined image, when not "final"
         self.shadow_tiles = {"drawn": 0, "skipped": 0}   # of the last frame
 
     # -- resources ---------------------------------------------------------------------
@@ -166,8 +167,10 @@ class Pipeline:
         return time.perf_counter()
 
     # -- passes ------------------------------------------------------------------------
-    def draw(self, snap, cache, target_fb=None, width=None, height=None):
-        """Render one frame into ``target_fb`` (None: the currently bound framebuffer)."""
+    def draw(self, snap, cache, target_fb=None, width=None, height=None, plan=None):
+        """Render one frame into ``target_fb`` (None: the currently bound framebuffer).
+        ``plan``: a shadow plan to reuse (the jittered samples of one final render share
+        the plan of its unjittered camera, so their shadow maps are drawn once)."""
         import gpu
         # Programs replaced by F5 or dropped with a library are freed here, in the context
         # that draws, never where they were retired (see the NOTE in shaders.py).
@@ -183,7 +186,8 @@ class Pipeline:
         bounds_lo_hi = instance_bounds(snap.instances, cache.meshes)
         bounds = None if bounds_lo_hi is None else \
             (bounds_lo_hi[0].min(axis=0), bounds_lo_hi[1].max(axis=0))
-        plan = plan_shadows(snap, bounds)
+        if plan is None:
+            plan = plan_shadows(snap, bounds)
         self.warnings.extend(w for w in snap.warnings + plan.warnings if w not in self.warnings)
         atlas = self._atlas(plan)
         frame_data = pack_frame(snap, plan)
@@ -426,6 +430,107 @@ class Pipeline:
         shader.uniform_float("clip_from_world", _column_major(snap.camera.clip_from_world))
         batch.draw(shader)
 
+    # -- anti-aliasing -------------------------------------------------------------------
+    def _fullscreen_pass(self, program, target_fb, width, height, samplers, floats=()):
+        import gpu
+        shader = shaders.LIBRARY.get(program)
+        with target_fb.bind():
+            gpu.state.viewport_set(0, 0, width, height)
+            gpu.state.depth_test_set('NONE')
+            gpu.state.blend_set('NONE')
+            shader.bind()
+            for name, texture in samplers:
+                shader.uniform_sampler(name, texture)
+            for name, value in floats:
+                shader.uniform_float(name, value)
+            self._gpu_call(self._fullscreen_batch().draw, shader)
+
+    def draw_viewport(self, snap, cache, width, height, fxaa=True):
+        """A viewport frame into the bound framebuffer, through FXAA when ``fxaa``: the
+        lit image goes to an offscreen target first, and FXAA writes it to the screen."""
+        import gpu
+        if not fxaa:
+            return self.draw(snap, cache, None, width, height)
+        blend = gpu.state.blend_get() if hasattr(gpu.state, "blend_get") else 'NONE'
+        lit = self._texture("lit", (width, height), 'RGBA16F')
+        lit_fb = self._framebuffer("lit", colors=(lit,))
+        with lit_fb.bind():
+            self._gpu_call(lit_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
+        gpu.state.blend_set('NONE')
+        plan = self.draw(snap, cache, lit_fb, width, height)
+        t = time.perf_counter()
+        shader = shaders.LIBRARY.get("fxaa")
+        gpu.state.viewport_set(0, 0, width, height)
+        gpu.state.depth_test_set('NONE')
+        gpu.state.blend_set(blend)
+        shader.bind()
+        shader.uniform_sampler("source", lit)
+        self._gpu_call(self._fullscreen_batch().draw, shader)
+        self.timings["fxaa"] = time.perf_counter() - t
+        return plan
+
+    def _draw_antialiased(self, snap, cache, samples, use_fxaa, color, aux):
+        """Final-render anti-aliasing: FXAA on one sample, or ``samples`` jittered frames
+        (core/antialiasing.py) averaged into a running mean. Sample 0 is unjittered and
+        writes the auxiliary target; later samples reuse its shadow plan, so the shadow maps
+        are drawn once. Leaves the framebuffer holding the Combined image in
+        ``self._combined_fb``."""
+        from ..core.antialiasing import jittered, sample_offsets
+        width, height = snap.camera.width, snap.camera.height
+        lit = self._texture("lit_final", (width, height), 'RGBA32F')
+        first_fb = self._framebuffer("lit_first", colors=(lit, aux))
+        with first_fb.bind():
+            self._gpu_call(first_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
+        started = time.perf_counter()
+        plan = self.draw(snap, cache, first_fb, width, height)
+        timings = dict(self.timings)
+        color_fb = self._framebuffer("final_color_only", colors=(color,))
+        t = time.perf_counter()
+        if use_fxaa:
+            self._fullscreen_pass("fxaa", color_fb, width, height, (("source", lit),))
+            self._combined_fb = color_fb
+            timings["fxaa"] = time.perf_counter() - t
+            timings["total"] = timings.get("total", 0.0) + timings["fxaa"]
+            self.timings = timings
+            return plan
+        # A running mean ping-pongs between the final colour target and a second one.
+        offsets, weights = sample_offsets(samples, snap.pixel_filter_width)
+        spare = self._texture("accumulate", (width, height), 'RGBA32F')
+        spare_fb = self._framebuffer("accumulate", colors=(spare,))
+        scratch_aux = self._texture("lit_aux_scratch", (width, height), 'RGBA32F')
+        sample_fb = self._framebuffer("lit_sample", colors=(lit, scratch_aux))
+        self._fullscreen_pass("accumulate", color_fb, width, height,
+                              (("previous", lit), ("current", lit)), (("sample_share", 1.0),))
+        accumulating = time.perf_counter() - t
+        mean, mean_fb, other, other_fb = color, color_fb, spare, spare_fb
+        total = weights[0]
+        camera = snap.camera
+        try:
+            for offset, weight in zip(offsets[1:], weights[1:]):
+                snap.camera = jittered(camera, offset)
+                with sample_fb.bind():
+                    self._gpu_call(sample_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
+                self.draw(snap, cache, sample_fb, width, height, plan=plan)
+                for name, value in self.timings.items():
+                    if name != "total":
+                        timings[name] = timings.get(name, 0.0) + value
+                total += weight
+                t = time.perf_counter()
+                self._fullscreen_pass("accumulate", other_fb, width, height,
+                                      (("previous", mean), ("current", lit)),
+                                      (("sample_share", float(weight / total)),))
+                accumulating += time.perf_counter() - t
+                mean, mean_fb, other, other_fb = other, other_fb, mean, mean_fb
+        finally:
+            snap.camera = camera
+        # The samples' own passes are added into shadow/gbuffer/lighting above; this step
+        # is the averaging alone.
+        timings["antialiasing"] = accumulating
+        timings["total"] = time.perf_counter() - started
+        self.timings = timings
+        self._combined_fb = mean_fb
+        return plan
+
     # -- read-back for final renders -----------------------------------------------------
     # What each image is read from: (target, colour slot); the G-buffer's normal target is
     # the pipeline's own, the other two the final target's.
@@ -447,14 +552,25 @@ class Pipeline:
         color = self._texture("final_color", (width, height), 'RGBA32F')
         aux = self._texture("final_aux", (width, height), 'RGBA32F')
         target = self._framebuffer("final", colors=(color, aux))
+        self._combined_fb = None
         with target.bind():
             target.clear(color=(0.0, 0.0, 0.0, 0.0))
-        plan = self.draw(snap, cache, target, width, height)
+        samples = max(int(getattr(snap.settings, "render_samples", 1)), 1)
+        use_fxaa = samples == 1 and bool(getattr(snap.settings, "fxaa", False))
+        if samples == 1 and not use_fxaa:
+            plan = self.draw(snap, cache, target, width, height)
+        else:
+            plan = self._draw_antialiased(snap, cache, samples, use_fxaa, color, aux)
+        combined_fb = self._combined_fb
         t = time.perf_counter()
+        out = {}
+        for name, channels in reads.items():        t = time.perf_counter()
         out = {}
         for name, channels in reads.items():
             source, slot = self.READS[name]
             fb = target if source == "final" else self.gbuffer_fb
+            if name == "combined":
+                fb, slot = combined_fb or target, 0
             buffer = gpu.types.Buffer('FLOAT', width * height * channels)
             with fb.bind():
                 fb.read_color(0, 0, width, height, channels, slot, 'FLOAT', data=buffer)

@@ -1,0 +1,125 @@
+/* Post-process anti-aliasing (FXAA, after Timothy Lottes' FXAA 3.11 "quality" algorithm):
+ * find the edge through each pixel from the luma of its neighbours, walk along it to both
+ * ends, and blend the pixel with its neighbour across the edge by how far the pixel is
+ * from the edge's middle: long, shallow stair steps become ramps.
+ *
+ * NOTE: textures made from Python sample with nearest filtering (the gpu module cannot set
+ * filtering), so every "half-texel" fetch of the original is written as the mean of two
+ * texelFetch()es, and the final blend mixes the two texels by hand.
+ * Input is scene-linear colour; luma is taken after a square root (close to the display's
+ * sRGB curve), so the thresholds mean what they mean on screen. */
+
+const float EDGE_THRESHOLD_MIN = 0.0312;
+const float EDGE_THRESHOLD_MAX = 0.125;
+const float SUBPIXEL_QUALITY = 0.75;
+const int EDGE_STEPS = 10;
+/* Step lengths (pixels) along the edge: fine near the pixel, coarser further out. */
+const float STEP_SIZES[EDGE_STEPS] = float[EDGE_STEPS](1.0, 1.0, 1.0, 1.0, 1.0, 2.0, 2.0, 2.0,
+                                                        4.0, 8.0);
+
+ivec2 source_size;
+
+vec4 color_at(ivec2 p)
+{
+  return texelFetch(source, clamp(p, ivec2(0), source_size - 1), 0);
+}
+
+float luma_of(vec4 c)
+{
+  return sqrt(clamp(dot(c.rgb, vec3(0.2126, 0.7152, 0.0722)), 0.0, 1.0));
+}
+
+float luma_at(ivec2 p)
+{
+  return luma_of(color_at(p));
+}
+
+void main()
+{
+  source_size = textureSize(source, 0);
+  ivec2 p = ivec2(gl_FragCoord.xy);
+  vec4 center_color = color_at(p);
+  float center = luma_of(center_color);
+  float down = luma_at(p + ivec2(0, -1));
+  float up = luma_at(p + ivec2(0, 1));
+  float left = luma_at(p + ivec2(-1, 0));
+  float right = luma_at(p + ivec2(1, 0));
+  float luma_min = min(center, min(min(down, up), min(left, right)));
+  float luma_max = max(center, max(max(down, up), max(left, right)));
+  float range = luma_max - luma_min;
+  if (range < max(EDGE_THRESHOLD_MIN, luma_max * EDGE_THRESHOLD_MAX)) {
+    out_color = center_color;
+    return;
+  }
+  float down_left = luma_at(p + ivec2(-1, -1));
+  float up_right = luma_at(p + ivec2(1, 1));
+  float up_left = luma_at(p + ivec2(-1, 1));
+  float down_right = luma_at(p + ivec2(1, -1));
+
+  float down_up = down + up;
+  float left_right = left + right;
+  float left_corners = down_left + up_left;
+  float down_corners = down_left + down_right;
+  float right_corners = down_right + up_right;
+  float up_corners = up_right + up_left;
+  float edge_horizontal = abs(-2.0 * left + left_corners) + abs(-2.0 * center + down_up) * 2.0 +
+                          abs(-2.0 * right + right_corners);
+  float edge_vertical = abs(-2.0 * up + up_corners) + abs(-2.0 * center + left_right) * 2.0 +
+                        abs(-2.0 * down + down_corners);
+  bool horizontal = edge_horizontal >= edge_vertical;
+
+  /* The two neighbours across the edge; step towards the one with the steeper gradient. */
+  float luma_1 = horizontal ? down : left;
+  float luma_2 = horizontal ? up : right;
+  float gradient_1 = luma_1 - center;
+  float gradient_2 = luma_2 - center;
+  bool steepest_is_1 = abs(gradient_1) >= abs(gradient_2);
+  float gradient_scaled = 0.25 * max(abs(gradient_1), abs(gradient_2));
+  ivec2 across = horizontal ? ivec2(0, steepest_is_1 ? -1 : 1) :
+                              ivec2(steepest_is_1 ? -1 : 1, 0);
+  float local_average = 0.5 * ((steepest_is_1 ? luma_1 : luma_2) + center);
+  ivec2 along = horizontal ? ivec2(1, 0) : ivec2(0, 1);
+
+  /* Walk both ways along the edge, reading the mean of the two rows it separates, until
+   * that mean leaves the local average by a quarter of the gradient: the edge ends. */
+  float distance_1 = 0.0, distance_2 = 0.0;
+  float end_1 = 0.0, end_2 = 0.0;
+  bool done_1 = false, done_2 = false;
+  for (int i = 0; i < EDGE_STEPS; i++) {
+    if (!done_1) {
+      distance_1 += STEP_SIZES[i];
+      ivec2 q = p - along * int(distance_1);
+      end_1 = 0.5 * (luma_at(q) + luma_at(q + across)) - local_average;
+      done_1 = abs(end_1) >= gradient_scaled;
+    }
+    if (!done_2) {
+      distance_2 += STEP_SIZES[i];
+      ivec2 q = p + along * int(distance_2);
+      end_2 = 0.5 * (luma_at(q) + luma_at(q + across)) - local_average;
+      done_2 = abs(end_2) >= gradient_scaled;
+    }
+    if (done_1 && done_2) {
+      break;
+    }
+  }
+  /* The walk starts half a pixel from the centre in the original (bilinear) algorithm. */
+  distance_1 -= 0.5;
+  distance_2 -= 0.5;
+  bool nearer_is_1 = distance_1 < distance_2;
+  float nearest = min(distance_1, distance_2);
+  float edge_length = distance_1 + distance_2;
+  float pixel_offset = -nearest / edge_length + 0.5;
+  /* Only blend when the luma at the nearer end varies the way the centre does: the pixel
+   * is then on the side of the step that the ramp should lift or lower. */
+  bool center_smaller = center < local_average;
+  bool correct = ((nearer_is_1 ? end_1 : end_2) < 0.0) != center_smaller;
+  float final_offset = correct ? pixel_offset : 0.0;
+
+  /* Sub-pixel aliasing (a lone bright pixel): blend by the neighbourhood's contrast. */
+  float average = (1.0 / 12.0) * (2.0 * (down_up + left_right) + left_corners + right_corners);
+  float subpixel = clamp(abs(average - center) / range, 0.0, 1.0);
+  subpixel = (-2.0 * subpixel + 3.0) * subpixel * subpixel;
+  final_offset = max(final_offset, subpixel * subpixel * SUBPIXEL_QUALITY);
+
+  out_color = mix(center_color, color_at(p + across), clamp(final_offset, 0.0, 1.0));
+}
