@@ -199,7 +199,12 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         self.update_progress(0.9)
 
         t = time.perf_counter()
-        render_result = self.begin_result(0, 0, width, height)
+        # Render Region: the whole camera view was drawn (so the region's shadows and
+        # pixels are those of the full render); Blender's result holds only the region, and
+        # Blender itself pastes it into the full frame unless Crop to Render Region is on.
+        x0, y0, x1, y1 = render_region(scene.render, width, height)
+        region_images = {name: image[y0:y1, x0:x1] for name, image in result.images.items()}
+        render_result = self.begin_result(0, 0, x1 - x0, y1 - y0)
         for name in ("Shadow", "Cascade"):
             if render_result.layers[0].passes.find_by_name(name, "") is None:
                 try:
@@ -207,7 +212,7 @@ class CSMRenderEngine(bpy.types.RenderEngine):
                 except Exception:
                     pass
         passes = render_result.layers[0].passes
-        images = result.images
+        images = region_images
         aux = images["aux"]
         compat.write_pass(passes["Combined"], images["combined"])
         pass_pixels = {"Shadow": aux[..., 0:1], "Cascade": aux[..., 1:2]}
@@ -261,6 +266,20 @@ class CSMRenderEngine(bpy.types.RenderEngine):
             gpu.state.blend_set('NONE')
             gpu.state.depth_test_set('NONE')
             gpu.state.depth_mask_set(False)
+
+
+def render_region(render, width, height):
+    """The pixels (x0, y0, x1, y1), bottom-left origin, that a final render delivers:
+    Output > Render Region when it is on, else the whole image. Rounded as Blender rounds
+    it (render_init_from_main: truncation of border * size), so the result is the size
+    Blender allocated."""
+    if not render.use_border:
+        return 0, 0, width, height
+    x0, x1 = int(render.border_min_x * width), int(render.border_max_x * width)
+    y0, y1 = int(render.border_min_y * height), int(render.border_max_y * height)
+    if x1 <= x0 or y1 <= y0:    # Blender renders the whole image for an empty region
+        return 0, 0, width, height
+    return x0, y0, x1, y1
 
 
 def failure_message(error):

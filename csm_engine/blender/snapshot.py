@@ -109,7 +109,11 @@ def settings_snapshot(scene, warnings=None):
     return SimpleNamespace(**values)
 
 
-def _world_color(world):
+def _world_color(world, warnings=None):
+    """The World's radiance as one colour: the Background colour times its strength; when
+    an Environment (or Image) Texture feeds the colour, the texture's average over the
+    sphere (see ``environment_average``); for anything else linked (a Sky Texture, a node
+    setup), the World's viewport colour, and a warning saying so."""
     if world is None:
         return np.zeros(3)
     if world.use_nodes and world.node_tree:
@@ -119,7 +123,57 @@ def _world_color(world):
                 strength = node.inputs[1].default_value
                 if not color.is_linked:
                     return np.array(color.default_value[:3]) * strength
+                source = color.links[0].from_node
+                image = getattr(source, "image", None)
+                if source.type in {'TEX_ENVIRONMENT', 'TEX_IMAGE'} and image is not None:
+                    average = environment_average(image, source.type == 'TEX_ENVIRONMENT')
+                    if average is not None:
+                        return average * strength
+                if warnings is not None:
+                    warnings.append(f"World '{world.name}': its colour comes from a "
+                                    f"{source.bl_label} node, which CSM cannot evaluate; "
+                                    "ambient and background use the World's viewport colour")
+                break
     return np.array(world.color[:3], dtype=np.float64)
+
+
+# Image -> (what the average was taken from, the average): an environment map is read once.
+_ENVIRONMENT_AVERAGES = {}
+
+
+def _srgb_to_linear(c):
+    return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
+
+
+def environment_average(image, equirectangular=True):
+    """Mean linear radiance (rgb) of an environment image over the sphere: rows of an
+    equirectangular map are weighted by the solid angle they cover (cos of latitude).
+    None when the image has no pixels (a missing file)."""
+    try:
+        width, height = image.size
+        channels = image.channels
+    except (ReferenceError, AttributeError):
+        return None
+    key = (image.name, width, height, image.filepath_raw, bool(image.is_dirty))
+    held = _ENVIRONMENT_AVERAGES.get(image.name)
+    if held is not None and held[0] == key:
+        return held[1]
+    if width * height == 0 or channels < 3:
+        return None
+    pixels = np.empty(width * height * channels, dtype=np.float32)
+    image.pixels.foreach_get(pixels)
+    rgb = pixels.reshape(height, width, channels)[..., :3].astype(np.float64)
+    # Byte images hold their colour space's values; float images (HDR, EXR) are linear.
+    if not image.is_float and image.colorspace_settings.name in {"sRGB", "sRGB EOTF"}:
+        rgb = _srgb_to_linear(rgb)
+    if equirectangular:
+        latitude = (np.arange(height) + 0.5) / height * np.pi - 0.5 * np.pi
+        weights = np.cos(latitude)
+    else:
+        weights = np.ones(height)
+    average = (rgb.mean(axis=1) * weights[:, None]).sum(axis=0) / weights.sum()
+    _ENVIRONMENT_AVERAGES[image.name] = (key, average)
+    return average
 
 
 def light_falloff(light, setting):
@@ -170,7 +224,7 @@ def take(depsgraph, camera, is_viewport=False):
                          scene_name=scene.name)
     # The World is a uniform radiance L: a diffuse surface receives the irradiance pi * L
     # and sends back albedo/pi of it, so ambient light is L * albedo, as in EEVEE.
-    world_color = _world_color(scene.world)
+    world_color = _world_color(scene.world, warnings)
     light_threshold = _light_threshold(scene)
     snap.ambient = world_color * snap.settings.ambient_strength
     snap.background = world_color
@@ -183,7 +237,12 @@ def take(depsgraph, camera, is_viewport=False):
             _add_light(snap, obj, _matrix(instance.matrix_world), light_threshold)
         elif obj.type in {'MESH', 'CURVE', 'SURFACE', 'FONT', 'META'}:
             key = obj.original.name if obj.original else obj.name
-            snap.instances.append(MeshInstance(key, _matrix(instance.matrix_world)))
+            # Blender 3.0+ per-object ray visibility, as EEVEE and Cycles honour it: hidden
+            # from the camera but still casting, or seen but casting no shadow.
+            snap.instances.append(MeshInstance(
+                key, _matrix(instance.matrix_world),
+                visible_camera=bool(getattr(obj, "visible_camera", True)),
+                casts_shadow=bool(getattr(obj, "visible_shadow", True))))
             snap.mesh_sources.setdefault(key, obj)
     for kind, lights, limit in (("point", snap.points, MAX_POINT_LIGHTS),
                                 ("spot", snap.spots, MAX_SPOT_LIGHTS)):

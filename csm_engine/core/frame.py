@@ -47,6 +47,8 @@ class SpotLight:
 class MeshInstance:
     key: str                    # mesh-cache key (the original object's name)
     world_from_object: np.ndarray
+    visible_camera: bool = True     # Object > Visibility > Ray Visibility > Camera
+    casts_shadow: bool = True       # Object > Visibility > Ray Visibility > Shadow
 
 
 @dataclass

@@ -211,8 +211,10 @@ class Pipeline:
         signatures = self._caster_signatures(snap, cache, items)
         cull_front = bool(snap.settings.cull_front_faces)
         stale = []
+        casts_shadow = np.array([i.casts_shadow for i in snap.instances], dtype=bool)
         for tile in plan.tiles:
-            visible = self._cull(snap.instances, bounds_lo_hi, tile)
+            visible = np.asarray(self._cull(snap.instances, bounds_lo_hi, tile), dtype=np.int64)
+            visible = visible[casts_shadow[visible]]
             clip_from_world = np.asarray(tile.clip_from_world, dtype=np.float64)
             signature = (tuple(tile.origin), tile.resolution, cull_front,
                          clip_from_world, world_from_objects[visible].tobytes(),
@@ -262,7 +264,8 @@ class Pipeline:
         gbuffer_fb = self._framebuffer("gbuffer", depth=depth,
                                        colors=(albedo, normal, view_depth))
         # Near to far, so the early depth test skips the shading of hidden fragments.
-        order = front_to_back(snap, bounds_lo_hi)
+        order = np.asarray(front_to_back(snap, bounds_lo_hi), dtype=np.int64)
+        order = order[np.array([i.visible_camera for i in snap.instances], dtype=bool)[order]]
         with gbuffer_fb.bind():
             gpu.state.viewport_set(0, 0, width, height)
             self._gpu_call(gbuffer_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
