@@ -447,6 +447,8 @@ class Pipeline:
             for name, value in floats:
                 shader.uniform_float(name, value)
             self._gpu_call(self._fullscreen_batch().draw, shader)
+            if self.profile:          # wait for the GPU, so the pass's time is its own
+                target_fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
 
     def draw_viewport(self, snap, cache, width, height, fxaa=True):
         """A viewport frame into the bound framebuffer, through FXAA when ``fxaa``: the

@@ -91,7 +91,7 @@ def test_render_samples_turn_the_staircase_into_a_straight_edge(edge_scene):
     assert slope == pytest.approx(math.tan(math.radians(EDGE_ANGLE_DEG)), abs=0.01)
     # Measured: 0.28 px aliased; 8 samples 0.086, 16 samples 0.043, 64 samples 0.018.
     assert smooth < 0.25 * aliased, (smooth, aliased)
-    # Eight samples (the default) already remove most of it.
+    # Eight samples already remove most of it.
     default, _ = stair_step_error(_render(edge_scene, 8, False)["combined"])
     assert default < 0.45 * aliased, (default, aliased)
 
