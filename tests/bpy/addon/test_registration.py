@@ -30,7 +30,7 @@ def test_settings_live_on_the_scene_with_course_defaults():
             assert prop.description, f"{prop.identifier} needs a tooltip"
     # Numbers say their unit or range; every tooltip says more than the label does.
     units = ("texel", "scene units", "degrees", "0 to 1", "fractions", "(1 to 4)",
-             "multiplier", "0 = nearest", "per second")
+             "multiplier", "0 = nearest", "per second", "(1 to 64)")
     for prop in list(csm.bl_rna.properties) + list(bpy.context.scene.csm_light.bl_rna.properties):
         if prop.identifier in ("rna_type", "name"):
             continue
