@@ -290,6 +290,9 @@ SHADOW_TILE_LAYOUT = UniformLayout("ShadowTileData", (
     ("is_perspective", "int", "1 perspective (spot) tile, 0 orthographic (sun cascade)"),
     ("display_near", "float", "where the scene begins in this light's depth (scene units; "
                               "the shadow-map debug view's black)"),
+    ("window_normal_from_world", "mat4", "orthographic tiles: a world normal into window "
+                                         "space (inverse transpose of shadow_from_world's "
+                                         "3x3), giving a receiver plane's depth slope"),
 ))
 
 POINT_LIGHT_LAYOUT = UniformLayout("PointLightData", (

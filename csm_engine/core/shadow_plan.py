@@ -169,6 +169,21 @@ def layout_atlas(tiles):
     return max(width, 1), max(y + row_height, 1)
 
 
+def window_normal_from_world(tile):
+    """4x4 whose upper 3x3 takes a world normal into an orthographic tile's window space
+    (x, y over the tile 0..1, z window depth): the inverse transpose of the window-from-world
+    3x3, as normals transform. A receiver plane with window normal (a, b, c) changes depth
+    by -(a dx + b dy) / c across the tile, which the lighting pass adds to each PCF tap's
+    compare depth (receiver-plane depth bias). Zero for perspective tiles (unused there)."""
+    out = np.zeros((4, 4))
+    if tile.is_perspective:
+        return out
+    linear = (WINDOW_FROM_CLIP @ np.asarray(tile.clip_from_world, dtype=np.float64))[:3, :3]
+    out[:3, :3] = np.linalg.inv(linear).T
+    out[3, 3] = 1.0
+    return out
+
+
 def pack_frame(snap, plan):
     """The frame uniform block for this frame (std140 float32 array, ``FRAME_LAYOUT``)."""
     s = snap.settings
@@ -188,7 +203,8 @@ def pack_frame(snap, plan):
     tile_rows = [dict(shadow_from_world=WINDOW_FROM_CLIP @ tile.clip_from_world,
                       atlas_origin=tile.origin, resolution=tile.resolution,
                       texel_world=tile.texel_world, light_near=tile.near, light_far=tile.far,
-                      is_perspective=int(tile.is_perspective), display_near=tile.display_near)
+                      is_perspective=int(tile.is_perspective), display_near=tile.display_near,
+                      window_normal_from_world=window_normal_from_world(tile))
                  for tile in plan.tiles]
     point_rows = [dict(position=light.position, radius=light.radius, color=light.color,
                        falloff=LIGHT_FALLOFF_INDEX[light.falloff])

@@ -167,10 +167,13 @@ class Pipeline:
         return time.perf_counter()
 
     # -- passes ------------------------------------------------------------------------
-    def draw(self, snap, cache, target_fb=None, width=None, height=None, plan=None):
+    def draw(self, snap, cache, target_fb=None, width=None, height=None, plan=None,
+             overlays=True):
         """Render one frame into ``target_fb`` (None: the currently bound framebuffer).
         ``plan``: a shadow plan to reuse (the jittered samples of one final render share
-        the plan of its unjittered camera, so their shadow maps are drawn once)."""
+        the plan of its unjittered camera, so their shadow maps are drawn once).
+        ``overlays``: draw the frozen cascade boxes; anti-aliased frames draw them after
+        the anti-aliasing instead (``draw_overlays``), so 1-pixel lines stay crisp."""
         import gpu
         # Programs replaced by F5 or dropped with a library are freed here, in the context
         # that draws, never where they were retired (see the NOTE in shaders.py).
@@ -302,7 +305,7 @@ class Pipeline:
             lighting.uniform_sampler("gbuffer_depth", view_depth)
             lighting.uniform_sampler("shadow_atlas", atlas)
             self._gpu_call(self._fullscreen_batch().draw, lighting)
-            if plan.frozen_camera is not None:
+            if overlays and plan.frozen_camera is not None:
                 self._draw_frozen(snap, plan)
 
         if target_fb is None:
@@ -462,7 +465,7 @@ class Pipeline:
         with lit_fb.bind():
             self._gpu_call(lit_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
         gpu.state.blend_set('NONE')
-        plan = self.draw(snap, cache, lit_fb, width, height)
+        plan = self.draw(snap, cache, lit_fb, width, height, overlays=False)
         t = time.perf_counter()
         shader = shaders.LIBRARY.get("fxaa")
         gpu.state.viewport_set(0, 0, width, height)
@@ -472,6 +475,8 @@ class Pipeline:
         shader.uniform_sampler("source", lit)
         self._gpu_call(self._fullscreen_batch().draw, shader)
         self.timings["fxaa"] = time.perf_counter() - t
+        if plan.frozen_camera is not None:
+            self._draw_frozen(snap, plan)
         return plan
 
     def _draw_antialiased(self, snap, cache, samples, use_fxaa, color, aux):
@@ -487,12 +492,13 @@ class Pipeline:
         with first_fb.bind():
             self._gpu_call(first_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
         started = time.perf_counter()
-        plan = self.draw(snap, cache, first_fb, width, height)
+        plan = self.draw(snap, cache, first_fb, width, height, overlays=False)
         timings = dict(self.timings)
         color_fb = self._framebuffer("final_color_only", colors=(color,))
         t = time.perf_counter()
         if use_fxaa:
             self._fullscreen_pass("fxaa", color_fb, width, height, (("source", lit),))
+            self._draw_overlays(snap, plan, color_fb, width, height)
             self._combined_fb = color_fb
             timings["fxaa"] = time.perf_counter() - t
             timings["total"] = timings.get("total", 0.0) + timings["fxaa"]
@@ -515,7 +521,7 @@ class Pipeline:
                 snap.camera = jittered(camera, offset)
                 with sample_fb.bind():
                     self._gpu_call(sample_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
-                self.draw(snap, cache, sample_fb, width, height, plan=plan)
+                self.draw(snap, cache, sample_fb, width, height, plan=plan, overlays=False)
                 for name, value in self.timings.items():
                     if name != "total":
                         timings[name] = timings.get(name, 0.0) + value
@@ -533,8 +539,17 @@ class Pipeline:
         timings["antialiasing"] = accumulating
         timings["total"] = time.perf_counter() - started
         self.timings = timings
+        self._draw_overlays(snap, plan, mean_fb, width, height)
         self._combined_fb = mean_fb
         return plan
+
+    def _draw_overlays(self, snap, plan, target_fb, width, height):
+        import gpu
+        if plan.frozen_camera is None:
+            return
+        with target_fb.bind():
+            gpu.state.viewport_set(0, 0, width, height)
+            self._draw_frozen(snap, plan)
 
     # -- read-back for final renders -----------------------------------------------------
     # What each image is read from: (target, colour slot); the G-buffer's normal target is

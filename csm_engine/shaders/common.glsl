@@ -35,13 +35,42 @@ float shadow_window_depth(float linear, ShadowTileData tile)
   return (linear - near) / (far - near);
 }
 
-/* One PCF tap: 1 lit, 0 shadowed. NOTE: the receiver's biased depth is converted to the
- * atlas's window depth once per pixel (compare_window), so a tap is one fetch and one
- * compare, with no per-tap linearization (the lighting pass is fill-bound on llvmpipe). */
-float shadow_tap(vec2 origin, float last_texel, vec2 texel, float compare_window)
+/* One PCF tap at atlas-tile position `tap` (texels): 1 lit, 0 shadowed. NOTE: the
+ * receiver's biased depth is converted to the atlas's window depth once per pixel
+ * (compare_window), so a tap is one fetch and one compare, with no per-tap linearization
+ * (the lighting pass is fill-bound on llvmpipe). The receiver plane: the depth the
+ * receiver's own surface has under the tapped texel's centre differs from its depth at
+ * `receiver` by depth_per_texel . (centre - receiver); comparing against that instead of
+ * one depth for every tap keeps a flat lit surface lit under any filter width. */
+float shadow_tap(vec2 origin, float last_texel, vec2 tap, vec2 receiver, float compare_window,
+                 vec2 depth_per_texel)
 {
-  ivec2 p = ivec2(clamp(floor(texel), vec2(0.0), vec2(last_texel))) + ivec2(origin);
-  return texelFetch(shadow_atlas, p, 0).r < compare_window ? 0.0 : 1.0;
+  vec2 texel = clamp(floor(tap), vec2(0.0), vec2(last_texel));
+  float compare = compare_window + dot(depth_per_texel, texel + 0.5 - receiver);
+  return texelFetch(shadow_atlas, ivec2(texel) + ivec2(origin), 0).r < compare ? 0.0 : 1.0;
+}
+
+/* Receiver-plane slope bound, in texels of depth per texel across (a plane the light
+ * grazes at 84 degrees): steeper planes are left to the slope bias, as their depth over a
+ * filter footprint exceeds what the map resolves anyway. */
+const float MAX_RECEIVER_SLOPE = 10.0;
+
+/* Window depth change per texel of a receiver plane with world normal n, in an orthographic
+ * tile (0 for perspective tiles, whose window depth is not linear). */
+vec2 receiver_depth_per_texel(ShadowTileData tile, vec3 n)
+{
+  if (tile.is_perspective != 0) {
+    return vec2(0.0);
+  }
+  vec3 window_normal = mat3(tile.window_normal_from_world) * n;
+  float depth_per_world = 1.0 / max(tile.light_far - tile.light_near, 1e-9);
+  float bound = MAX_RECEIVER_SLOPE * tile.texel_world * depth_per_world;
+  vec2 slope = -window_normal.xy / (window_normal.z * tile.resolution);
+  if (abs(window_normal.z) < 1e-9 || any(isnan(slope))) {
+    return vec2(0.0);
+  }
+  float length_slope = length(slope);
+  return length_slope > bound ? slope * (bound / length_slope) : slope;
 }
 
 /* Visibility (1 lit, 0 shadowed) of world point p with normal n from shadow tile t. */
@@ -61,8 +90,12 @@ float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l)
    * texel size, so one setting holds in every cascade whatever its resolution and extent. */
   float normal_offset = frame.normal_offset_texels * texel_world * (1.0 - n_dot_l * 0.5);
   float pcf_radius = frame.pcf_radius_texels;
+  vec2 depth_per_texel = receiver_depth_per_texel(tile, n);
+  /* Perspective tiles have no receiver plane: their slope bias also covers the filter's
+   * width, as before. */
+  float filter_reach = tile.is_perspective != 0 ? 1.0 + pcf_radius : 1.0;
   float bias = texel_world * (frame.depth_bias_texels + frame.slope_bias_texels * tan_l *
-                              (1.0 + pcf_radius));
+                              filter_reach);
 
   vec4 s = tile.shadow_from_world * vec4(p + n * normal_offset, 1.0);
   s.xyz /= s.w;
@@ -78,7 +111,7 @@ float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l)
   int radius = int(pcf_radius);
   int pattern = frame.pcf_pattern;
   if (radius == 0) {
-    return shadow_tap(origin, last_texel, texel, compare);
+    return shadow_tap(origin, last_texel, texel, texel, compare, depth_per_texel);
   }
   float lit = 0.0;
   float taps = 0.0;
@@ -95,24 +128,25 @@ float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l)
       for (int x = 0; x <= last; x++) {
         float wx = (x == 0) ? 1.0 - f.x : ((x == last) ? f.x : 1.0);
         vec2 center = base + vec2(float(x - radius), float(y - radius)) + 0.5;
-        lit += wx * wy * shadow_tap(origin, last_texel, center, compare);
+        lit += wx * wy * shadow_tap(origin, last_texel, center, texel, compare, depth_per_texel);
       }
     }
     taps = float(last * last);
   }
   else {
     float r = float(radius);
-    lit = shadow_tap(origin, last_texel, texel, compare);
-    lit += shadow_tap(origin, last_texel, texel + vec2(r, 0.0), compare);
-    lit += shadow_tap(origin, last_texel, texel + vec2(-r, 0.0), compare);
-    lit += shadow_tap(origin, last_texel, texel + vec2(0.0, r), compare);
-    lit += shadow_tap(origin, last_texel, texel + vec2(0.0, -r), compare);
+    lit = shadow_tap(origin, last_texel, texel, texel, compare, depth_per_texel);
+    lit += shadow_tap(origin, last_texel, texel + vec2(r, 0.0), texel, compare, depth_per_texel);
+    lit += shadow_tap(origin, last_texel, texel + vec2(-r, 0.0), texel, compare, depth_per_texel);
+    lit += shadow_tap(origin, last_texel, texel + vec2(0.0, r), texel, compare, depth_per_texel);
+    lit += shadow_tap(origin, last_texel, texel + vec2(0.0, -r), texel, compare, depth_per_texel);
     taps = 5.0;
     if (pattern == PCF_NINE_TAP) {
-      lit += shadow_tap(origin, last_texel, texel + vec2(r, r), compare);
-      lit += shadow_tap(origin, last_texel, texel + vec2(-r, r), compare);
-      lit += shadow_tap(origin, last_texel, texel + vec2(r, -r), compare);
-      lit += shadow_tap(origin, last_texel, texel + vec2(-r, -r), compare);
+      lit += shadow_tap(origin, last_texel, texel + vec2(r, r), texel, compare, depth_per_texel);
+      lit += shadow_tap(origin, last_texel, texel + vec2(-r, r), texel, compare, depth_per_texel);
+      lit += shadow_tap(origin, last_texel, texel + vec2(r, -r), texel, compare, depth_per_texel);
+      lit += shadow_tap(origin, last_texel, texel + vec2(-r, -r), texel, compare,
+                        depth_per_texel);
       taps = 9.0;
     }
   }
