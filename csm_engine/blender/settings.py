@@ -57,6 +57,16 @@ LIGHT_FALLOFFS_LABELS = {
 }
 
 
+SHADOW_FILTERS_LABELS = {
+    "HARD": ("Hard", "One shadow-map tap per pixel: texel-sized stair steps on edges"),
+    "PCF": ("PCF", "Percentage-closer filtering with the fixed kernel below (PCF Radius, "
+                   "PCF Pattern): the same softness everywhere"),
+    "SOFT": ("Soft (light size)", "Penumbrae from the light's real size (sun Angle, spot "
+                                  "Radius): sharp at contact, wider with distance, as in "
+                                  "Cycles (PCSS: blocker search, then a variable filter)"),
+}
+
+
 def _enum_items(identifiers, labels):
     """EnumProperty items in core's order (core owns the identifiers, and the GLSL values
     are their positions); here only their labels and tooltips."""
@@ -68,6 +78,7 @@ def _enum_items(identifiers, labels):
 SPLIT_SCHEMES = _enum_items(frame_layout.SPLIT_SCHEMES, SPLIT_SCHEMES_LABELS)
 PCF_PATTERNS = _enum_items(frame_layout.PCF_PATTERNS, PCF_PATTERNS_LABELS)
 DEBUG_VIEWS = _enum_items(frame_layout.DEBUG_VIEWS, DEBUG_VIEWS_LABELS)
+SHADOW_FILTERS = _enum_items(frame_layout.SHADOW_FILTERS, SHADOW_FILTERS_LABELS)
 # 'PER_LIGHT' is not a falloff of its own: snapshot.py picks one of the others per light.
 LIGHT_FALLOFFS = (('PER_LIGHT', "Per light", "Lights imported from a course scene file (they "
                    "carry the custom property csm_radius) fall off linearly to their radius; "
@@ -80,6 +91,7 @@ ENUM_ITEMS = {
     "pcf_pattern": PCF_PATTERNS,
     "debug_view": DEBUG_VIEWS,
     "light_falloff": LIGHT_FALLOFFS,
+    "shadow_filter": SHADOW_FILTERS,
 }
 
 
@@ -145,6 +157,11 @@ class CSMSettings(bpy.types.PropertyGroup):
                     "Larger: a softer, longer fade")
 
     # --- Filtering ----------------------------------------------------------------------
+    shadow_filter: EnumProperty(
+        name="Shadow Filter", items=SHADOW_FILTERS, default='PCF', update=_redraw,
+        description="How shadow edges are filtered: one hard tap, the fixed PCF kernel "
+                    "below, or soft shadows whose penumbra widens with the distance to the "
+                    "caster as the sun's Angle and a spot light's Radius say (PCSS)")
     pcf_radius: IntProperty(
         name="PCF Radius", default=1, min=0, max=8, update=_redraw,
         description="Percentage-closer filtering kernel radius in texels: 0 = single tap, "

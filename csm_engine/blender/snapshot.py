@@ -262,7 +262,8 @@ def _add_light(snap, obj, world_from_light, light_threshold=DEFAULT_LIGHT_THRESH
         if snap.sun is None:   # the first sun casts the cascades; CSM has one sun
             # Strength is the irradiance (W/m^2) on a surface facing the sun.
             snap.sun = Sun(to_light=axis_z, color=color * light.energy,
-                           casts_shadow=casts_shadow, name=obj.name)
+                           casts_shadow=casts_shadow, name=obj.name,
+                           angle=float(getattr(light, "angle", 0.0)))
         return
     if light.type not in {'POINT', 'SPOT'}:
         return      # AREA lights are not supported by CSM (neither by the course)
@@ -282,5 +283,6 @@ def _add_light(snap, obj, world_from_light, light_threshold=DEFAULT_LIGHT_THRESH
             spot_blend=float(light.spot_blend), casts_shadow=casts_shadow,
             world_from_light=rotation,
             clip_start=float(getattr(light, "shadow_buffer_clip_start", 0.05) or 0.05),
-            falloff=falloff))
+            falloff=falloff,
+            source_radius=float(getattr(light, "shadow_soft_size", 0.0))))
 

@@ -32,8 +32,11 @@ def draw_cascades(layout, csm):
 
 def draw_filtering(layout, csm):
     col = layout.column()
-    col.prop(csm, "pcf_radius")
-    col.prop(csm, "pcf_pattern")
+    col.prop(csm, "shadow_filter")
+    sub = col.column()
+    sub.active = csm.shadow_filter == 'PCF'
+    sub.prop(csm, "pcf_radius")
+    sub.prop(csm, "pcf_pattern")
     col.prop(csm, "blend_band")
 
 

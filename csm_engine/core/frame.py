@@ -19,6 +19,7 @@ class Sun:
     color: np.ndarray           # W/m^2 on a surface facing the sun (colour x strength)
     casts_shadow: bool
     name: str = ""
+    angle: float = 0.0          # angular diameter (radians): soft shadows' penumbra
 
 
 @dataclass
@@ -41,6 +42,7 @@ class SpotLight:
     world_from_light: np.ndarray
     clip_start: float
     falloff: str = "PHYSICAL"   # frame_layout.LIGHT_FALLOFFS, as for PointLight
+    source_radius: float = 0.0  # Blender's Radius (scene units): soft shadows' penumbra
 
 
 @dataclass
@@ -64,6 +66,7 @@ class FrameSnapshot:
     background: np.ndarray = field(default_factory=lambda: np.zeros(3))
     film_transparent: bool = False
     pixel_filter_width: float = 1.5    # Film > Filter Size (pixels): final-render AA spread
+    sample_index: int = 0       # jittered sample of a final render (0: the first, unjittered)
     scene_name: str = ""
     warnings: list = field(default_factory=list)      # what the snapshot had to correct
 

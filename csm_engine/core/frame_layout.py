@@ -31,15 +31,19 @@ SPLIT_SCHEMES = ("UNIFORM", "LOG", "HYBRID", "MANUAL")
 # inverse square (with its smooth cut-off at the influence radius); LINEAR_RADIUS is the
 # course's 1 - d/radius.
 LIGHT_FALLOFFS = ("PHYSICAL", "LINEAR_RADIUS")
+# How shadow edges are filtered: one hard tap, the fixed PCF kernel (radius and pattern
+# settings), or soft shadows whose penumbra follows the light's size (PCSS).
+SHADOW_FILTERS = ("HARD", "PCF", "SOFT")
 
 DEBUG_VIEW_INDEX = {name: index for index, name in enumerate(DEBUG_VIEWS)}
 PCF_PATTERN_INDEX = {name: index for index, name in enumerate(PCF_PATTERNS)}
 SPLIT_SCHEME_INDEX = {name: index for index, name in enumerate(SPLIT_SCHEMES)}
 LIGHT_FALLOFF_INDEX = {name: index for index, name in enumerate(LIGHT_FALLOFFS)}
+SHADOW_FILTER_INDEX = {name: index for index, name in enumerate(SHADOW_FILTERS)}
 
 # GLSL name prefix of each enum: DEBUG_VIEWS' "SHADOW_MAP" is DEBUG_SHADOW_MAP in GLSL.
 GLSL_ENUMS = (("DEBUG", DEBUG_VIEWS), ("PCF", PCF_PATTERNS), ("SPLIT", SPLIT_SCHEMES),
-              ("FALLOFF", LIGHT_FALLOFFS))
+              ("FALLOFF", LIGHT_FALLOFFS), ("FILTER", SHADOW_FILTERS))
 
 
 def glsl_defines():
@@ -315,6 +319,8 @@ SPOT_LIGHT_LAYOUT = UniformLayout("SpotLightData", (
     ("cos_outer", "float", "cosine of the half cone angle: no light outside it"),
     ("cos_inner", "float", "cosine of the angle where the edge blend begins: full inside"),
     ("falloff", "int", "FALLOFF_* with distance"),
+    ("source_radius", "float", "radius of the light's sphere (scene units, Blender's Radius): "
+                               "the size of its soft shadows' penumbrae"),
 ))
 
 # Everything the G-buffer and lighting passes read for one frame. Packed by
@@ -343,6 +349,11 @@ FRAME_LAYOUT = UniformLayout("FrameData", (
     ("depth_bias_texels", "float", "constant depth bias (shadow texels)"),
     ("slope_bias_texels", "float", "depth bias per unit of tan(light angle) (texels)"),
     ("normal_offset_texels", "float", "lookup moved along the normal (shadow texels)"),
+    ("shadow_filter", "int", "FILTER_* edge filter for sun and spot shadows"),
+    ("sun_tan_half_angle", "float", "tan of half the sun's angular diameter (Blender's "
+                                    "Angle): penumbra width per unit of blocker distance"),
+    ("sample_index", "int", "which jittered sample of a final render this is (0 in the "
+                            "viewport): moves per-pixel noise so samples average it away"),
     ("point_light_count", "int", "point_lights in use, 0..MAX_POINT_LIGHTS"),
     ("spot_light_count", "int", "spot_lights in use, 0..MAX_SPOT_LIGHTS"),
     ("debug_view", "int", "DEBUG_* view to draw, DEBUG_NONE for the lit image"),

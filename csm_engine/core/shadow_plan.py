@@ -7,6 +7,7 @@ Pure functions of a ``FrameSnapshot`` (plain data) and the scene bounds: ``plan_
 The GPU side (``render/pipeline.py``) only executes the plan. numpy only.
 """
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,7 +16,7 @@ from . import cascades
 from .frame import spot_cone_cosines
 from .frame_layout import (DEBUG_VIEW_INDEX, FRAME_LAYOUT, LIGHT_FALLOFF_INDEX, MAX_CASCADES,
                            MAX_POINT_LIGHTS, MAX_SHADOW_TILES, MAX_SPOT_LIGHTS,
-                           PCF_PATTERN_INDEX)
+                           PCF_PATTERN_INDEX, SHADOW_FILTER_INDEX)
 
 CASCADE_LINE_COLORS = ((1, .2, .2, 1), (.2, 1, .2, 1), (.3, .4, 1, 1), (1, 1, .2, 1))
 
@@ -184,6 +185,15 @@ def window_normal_from_world(tile):
     return out
 
 
+def sun_tan_half_angle(sun):
+    """tan of half the sun's angular diameter (Blender's Angle, 0..180 degrees): the soft
+    shadows' penumbra width per unit of distance behind the blocker, on each side."""
+    if sun is None:
+        return 0.0
+    angle = min(max(float(getattr(sun, "angle", 0.0)), 0.0), math.radians(179.0))
+    return math.tan(0.5 * angle)
+
+
 def pack_frame(snap, plan):
     """The frame uniform block for this frame (std140 float32 array, ``FRAME_LAYOUT``)."""
     s = snap.settings
@@ -215,7 +225,8 @@ def pack_frame(snap, plan):
         spot_rows.append(dict(position=spot.position, radius=spot.radius, color=spot.color,
                               shadow_tile=plan.spot_tiles.get(i, -1), direction=spot.direction,
                               cos_outer=cos_outer, cos_inner=cos_inner,
-                              falloff=LIGHT_FALLOFF_INDEX[spot.falloff]))
+                              falloff=LIGHT_FALLOFF_INDEX[spot.falloff],
+                              source_radius=spot.source_radius))
     return FRAME_LAYOUT.pack(dict(
         clip_from_world=camera.clip_from_world,
         view_from_world=np.linalg.inv(camera.world_from_view),
@@ -239,6 +250,9 @@ def pack_frame(snap, plan):
         depth_bias_texels=s.depth_bias,
         slope_bias_texels=s.slope_bias,
         normal_offset_texels=s.normal_offset,
+        shadow_filter=SHADOW_FILTER_INDEX[getattr(s, "shadow_filter", "PCF")],
+        sample_index=getattr(snap, "sample_index", 0),
+        sun_tan_half_angle=sun_tan_half_angle(sun),
         point_light_count=len(points),
         spot_light_count=len(spots),
         debug_view=DEBUG_VIEW_INDEX[s.debug_view],

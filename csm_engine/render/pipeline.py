@@ -517,8 +517,9 @@ class Pipeline:
         total = weights[0]
         camera = snap.camera
         try:
-            for offset, weight in zip(offsets[1:], weights[1:]):
+            for index, (offset, weight) in enumerate(zip(offsets[1:], weights[1:]), start=1):
                 snap.camera = jittered(camera, offset)
+                snap.sample_index = index
                 with sample_fb.bind():
                     self._gpu_call(sample_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
                 self.draw(snap, cache, sample_fb, width, height, plan=plan, overlays=False)
@@ -534,6 +535,7 @@ class Pipeline:
                 mean, mean_fb, other, other_fb = other, other_fb, mean, mean_fb
         finally:
             snap.camera = camera
+            snap.sample_index = 0
         # The samples' own passes are added into shadow/gbuffer/lighting above; this step
         # is the averaging alone.
         timings["antialiasing"] = accumulating

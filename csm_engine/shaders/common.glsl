@@ -53,7 +53,7 @@ float shadow_tap(vec2 origin, float last_texel, vec2 tap, vec2 receiver, float c
 /* Receiver-plane slope bound, in texels of depth per texel across (a plane the light
  * grazes at 84 degrees): steeper planes are left to the slope bias, as their depth over a
  * filter footprint exceeds what the map resolves anyway. */
-const float MAX_RECEIVER_SLOPE = 10.0;
+const float RECEIVER_SLOPE_LIMIT = 10.0;
 
 /* Window depth change per texel of a receiver plane with world normal n, in an orthographic
  * tile (0 for perspective tiles, whose window depth is not linear). */
@@ -64,7 +64,7 @@ vec2 receiver_depth_per_texel(ShadowTileData tile, vec3 n)
   }
   vec3 window_normal = mat3(tile.window_normal_from_world) * n;
   float depth_per_world = 1.0 / max(tile.light_far - tile.light_near, 1e-9);
-  float bound = MAX_RECEIVER_SLOPE * tile.texel_world * depth_per_world;
+  float bound = RECEIVER_SLOPE_LIMIT * tile.texel_world * depth_per_world;
   vec2 slope = -window_normal.xy / (window_normal.z * tile.resolution);
   if (abs(window_normal.z) < 1e-9 || any(isnan(slope))) {
     return vec2(0.0);
@@ -73,8 +73,123 @@ vec2 receiver_depth_per_texel(ShadowTileData tile, vec3 n)
   return length_slope > bound ? slope * (bound / length_slope) : slope;
 }
 
-/* Visibility (1 lit, 0 shadowed) of world point p with normal n from shadow tile t. */
-float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l)
+/* Soft shadows (PCSS, after Fernando 2005): how far the penumbra reaches depends on how far
+ * the receiver is behind its blockers, and on the light's size. */
+const int BLOCKER_SAMPLES = 16;
+const int SOFT_FILTER_SAMPLES = 16;
+/* Widest blocker search and penumbra radius, in texels of the tile: beyond this a soft
+ * shadow is cut to this width (a cascade's texels are its own unit, so the same number
+ * holds in every cascade). */
+const float SOFT_RADIUS_LIMIT_TEXELS = 48.0;
+const float GOLDEN_ANGLE = 2.39996323;
+
+/* A per-pixel rotation in 0..2pi (interleaved gradient noise, Jimenez 2014): neighbouring
+ * pixels sample the disk at other angles, so the few samples read as fine grain instead of
+ * banding. */
+float sample_rotation()
+{
+  /* Each jittered sample of a final render turns the pattern by the golden ratio. */
+  return 6.28318531 * fract(52.9829189 * fract(dot(gl_FragCoord.xy,
+                                                   vec2(0.06711056, 0.00583715))) +
+                            0.618034 * float(frame.sample_index));
+}
+
+/* Sample i of n on a Vogel (golden-angle) disk of radius 1, rotated by `rotation`. */
+vec2 vogel_disk(int i, int n, float rotation)
+{
+  float r = sqrt((float(i) + 0.5) / float(n));
+  float a = float(i) * GOLDEN_ANGLE + rotation;
+  return r * vec2(cos(a), sin(a));
+}
+
+/* Four texels around `tap`, bilinearly weighted: 1 lit, 0 shadowed. */
+float shadow_tap_bilinear(vec2 origin, float last_texel, vec2 tap, vec2 receiver,
+                          float compare, vec2 depth_per_texel)
+{
+  vec2 t = tap - 0.5;
+  vec2 base = floor(t);
+  vec2 f = t - base;
+  vec2 c = base + 0.5;
+  float a = shadow_tap(origin, last_texel, c, receiver, compare, depth_per_texel);
+  float b = shadow_tap(origin, last_texel, c + vec2(1.0, 0.0), receiver, compare, depth_per_texel);
+  float d = shadow_tap(origin, last_texel, c + vec2(0.0, 1.0), receiver, compare, depth_per_texel);
+  float e = shadow_tap(origin, last_texel, c + vec2(1.0, 1.0), receiver, compare, depth_per_texel);
+  return mix(mix(a, b, f.x), mix(d, e, f.x), f.y);
+}
+
+/* Penumbra radius in texels for a receiver at `receiver_linear` behind blockers at
+ * `blocker_linear` (distances from the light). Sun (orthographic): the sun's disk of
+ * half-angle h spreads an edge over 2 tan(h) (receiver - blocker) in the world. Spot
+ * (perspective): a sphere of radius R at the light spreads it over 2 R (receiver - blocker)
+ * / blocker; a texel there is texel_world * receiver wide. */
+float penumbra_radius_texels(ShadowTileData tile, float light_size, float receiver_linear,
+                             float blocker_linear, float texel_world)
+{
+  float distance = max(receiver_linear - blocker_linear, 0.0);
+  if (tile.is_perspective != 0) {
+    return light_size * distance / max(blocker_linear, 1e-4) / texel_world;
+  }
+  return light_size * distance / texel_world;
+}
+
+float soft_shadow(ShadowTileData tile, float light_size, vec2 texel, float compare,
+                  vec2 depth_per_texel, float receiver_linear, float texel_world)
+{
+  vec2 origin = tile.atlas_origin;
+  float last_texel = tile.resolution - 1.0;
+  /* 1. Blocker search: where could something stand between this point and the light?
+   * Up to the nearest depth anything in this tile has (display_near). */
+  float nearest = max(tile.display_near, tile.light_near);
+  float search = clamp(penumbra_radius_texels(tile, light_size, receiver_linear, nearest,
+                                              texel_world), 1.0, SOFT_RADIUS_LIMIT_TEXELS);
+  float rotation = sample_rotation();
+  float blocker_window = 0.0;
+  float blockers = 0.0;
+  for (int i = 0; i < BLOCKER_SAMPLES; i++) {
+    vec2 tap = texel + search * vogel_disk(i, BLOCKER_SAMPLES, rotation);
+    vec2 cell = clamp(floor(tap), vec2(0.0), vec2(last_texel));
+    float plane = compare + dot(depth_per_texel, cell + 0.5 - texel);
+    float stored = texelFetch(shadow_atlas, ivec2(cell) + ivec2(origin), 0).r;
+    if (stored < plane) {
+      blocker_window += stored;
+      blockers += 1.0;
+    }
+  }
+  if (blockers == 0.0) {
+    return 1.0;
+  }
+  /* 2. The penumbra from the blockers' mean distance; 3. a filter that wide. */
+  float blocker_linear = shadow_linear_depth(blocker_window / blockers, tile);
+  float radius = min(penumbra_radius_texels(tile, light_size, receiver_linear, blocker_linear,
+                                            texel_world), SOFT_RADIUS_LIMIT_TEXELS);
+  if (radius < 1.5) {
+    /* Narrow penumbra: the 3x3 bilinear kernel (PCF radius 1) resolves it smoothly. */
+    float lit = 0.0;
+    vec2 t = texel - 0.5;
+    vec2 base = floor(t);
+    vec2 f = t - base;
+    for (int y = 0; y <= 3; y++) {
+      float wy = (y == 0) ? 1.0 - f.y : ((y == 3) ? f.y : 1.0);
+      for (int x = 0; x <= 3; x++) {
+        float wx = (x == 0) ? 1.0 - f.x : ((x == 3) ? f.x : 1.0);
+        vec2 center = base + vec2(float(x - 1), float(y - 1)) + 0.5;
+        lit += wx * wy * shadow_tap(origin, last_texel, center, texel, compare, depth_per_texel);
+      }
+    }
+    return lit / 9.0;
+  }
+  float lit = 0.0;
+  for (int i = 0; i < SOFT_FILTER_SAMPLES; i++) {
+    vec2 tap = texel + radius * vogel_disk(i, SOFT_FILTER_SAMPLES, rotation);
+    lit += shadow_tap_bilinear(origin, last_texel, tap, texel, compare, depth_per_texel);
+  }
+  return lit / float(SOFT_FILTER_SAMPLES);
+}
+
+/* Visibility (1 lit, 0 shadowed) of world point p with normal n from shadow tile t.
+ * light_size: the sun's tan(half angle), or a spot light's radius (scene units); used by
+ * the soft filter only. */
+float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l, float light_size)
 {
   ShadowTileData tile = frame.shadow_tiles[t];
 
@@ -108,7 +223,11 @@ float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l)
   float last_texel = tile.resolution - 1.0;
   vec2 texel = s.xy * tile.resolution;
 
-  int radius = int(pcf_radius);
+  if (frame.shadow_filter == FILTER_SOFT) {
+    return soft_shadow(tile, light_size, texel, compare, depth_per_texel, receiver,
+                       texel_world);
+  }
+  int radius = frame.shadow_filter == FILTER_HARD ? 0 : int(pcf_radius);
   int pattern = frame.pcf_pattern;
   if (radius == 0) {
     return shadow_tap(origin, last_texel, texel, texel, compare, depth_per_texel);
@@ -175,14 +294,14 @@ float sun_visibility(vec3 p, vec3 n, float n_dot_l, float view_depth, out float 
   if (i < 0) {
     return 1.0;
   }
-  float vis = shadow_tile_visibility(i, p, n, n_dot_l);
+  float vis = shadow_tile_visibility(i, p, n, n_dot_l, frame.sun_tan_half_angle);
   int count = frame.cascade_count;
   float split = frame.cascades[i].far_depth;
   float band = frame.cascades[i].blend_band;
   if (i + 1 < count && band > 0.0 && view_depth > split - band) {
     /* The next cascade's box was fitted from split - band on, so it covers this point. */
     float w = clamp((view_depth - (split - band)) / band, 0.0, 1.0);
-    vis = mix(vis, shadow_tile_visibility(i + 1, p, n, n_dot_l), w);
+    vis = mix(vis, shadow_tile_visibility(i + 1, p, n, n_dot_l, frame.sun_tan_half_angle), w);
     cascade_out += w;
   }
   float fade_start = frame.fade_start_depth;

@@ -134,7 +134,7 @@ void main()
     if (attenuation > 0.0) {
       float vis = 1.0;
       if (spot.shadow_tile >= 0) {
-        vis = shadow_tile_visibility(spot.shadow_tile, p, n, dot(n, l));
+        vis = shadow_tile_visibility(spot.shadow_tile, p, n, dot(n, l), spot.source_radius);
       }
       color += spot.color * attenuation * vis *
                blinn_phong(albedo, specular, shininess, n, l, to_camera);
