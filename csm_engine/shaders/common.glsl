@@ -51,9 +51,9 @@ float shadow_tap(vec2 origin, float last_texel, vec2 tap, vec2 receiver, float c
 }
 
 /* Receiver-plane slope bound, in texels of depth per texel across (a plane the light
- * grazes at 84 degrees): steeper planes are left to the slope bias, as their depth over a
- * filter footprint exceeds what the map resolves anyway. */
-const float RECEIVER_SLOPE_LIMIT = 10.0;
+ * grazes at 89 degrees): steeper planes are left to the slope bias; without a bound a
+ * plane edge-on to the light would give an infinite slope. */
+const float RECEIVER_SLOPE_LIMIT = 60.0;
 
 /* Window depth change per texel of a receiver plane with world normal n, in an orthographic
  * tile (0 for perspective tiles, whose window depth is not linear). */

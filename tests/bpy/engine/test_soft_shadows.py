@@ -1,0 +1,142 @@
+"""Soft shadows from the light's size, and fully lit ground, checked in pixels.
+
+Square plates float at known heights above the ground under a sun straight above, seen by
+an orthographic camera from above. A sun of angular diameter a spreads each plate's edge
+over a penumbra 2 h tan(a / 2) wide on the ground (h: the plate's height), as Cycles
+renders it; the Shadow pass (sun visibility) gives the penumbra's width in pixels.
+"""
+import math
+
+import bpy
+import numpy as np
+import pytest
+
+from tests.bpy.bpy_helpers import render_scene
+from tests.bpy.engine.test_shadows import add_box, add_camera, add_ground, add_sun
+
+WIDTH, HEIGHT = 400, 200
+ORTHO_SCALE = 20.0                      # scene units across the image
+PIXELS_PER_UNIT = WIDTH / ORTHO_SCALE
+HEIGHTS = (1.0, 4.0)                    # plate heights above the ground
+PLATE_X = (-5.0, 5.0)
+
+
+@pytest.fixture
+def plates(empty_scene):
+    scene = empty_scene
+    add_ground(60)
+    for x, h in zip(PLATE_X, HEIGHTS):
+        plate = add_box((x, 0.0, h), (2.0, 2.0, 0.02), size=1.0)   # 2 x 2 plate, 2 cm thick
+        plate.visible_camera = False        # the camera sees the ground under it
+    sun = add_sun((0.0, 0.0, -1.0))
+    camera = add_camera(scene, (0.0, 0.0, 30.0), (0.0, 0.0, 0.0), clip_end=100.0)
+    camera.data.type = 'ORTHO'
+    camera.data.ortho_scale = ORTHO_SCALE
+    scene.csm.shadow_filter = 'SOFT'
+    return scene, sun
+
+
+def penumbra_widths(visibility):
+    """Penumbra width (scene units) across the left edge of each plate's shadow, measured
+    along the image's middle row: the run of pixels with 0.05 < visibility < 0.95."""
+    row = visibility[HEIGHT // 2]
+    widths = []
+    for x in PLATE_X:
+        edge = int(WIDTH / 2 + (x - 1.0) * PIXELS_PER_UNIT)        # the plate's left edge
+        window = row[edge - 40:edge + 20]
+        widths.append(np.count_nonzero((window > 0.05) & (window < 0.95)) / PIXELS_PER_UNIT)
+    return widths
+
+
+def ground_visibility(scene):
+    images = render_scene(scene, WIDTH, HEIGHT)
+    return images["aux"][..., 0]
+
+
+def test_penumbra_widens_with_the_blockers_height_and_the_suns_angle(plates):
+    scene, sun = plates
+    sun.data.angle = math.radians(10.0)
+    low, high = penumbra_widths(ground_visibility(scene))
+    expected = [2.0 * h * math.tan(math.radians(5.0)) for h in HEIGHTS]
+    # A soft edge ramps like a smoothstep: 5%..95% is ~80% of the full 0..100% width.
+    assert low == pytest.approx(0.8 * expected[0], rel=0.5), (low, expected)
+    assert high == pytest.approx(0.8 * expected[1], rel=0.35), (high, expected)
+    assert high > 2.5 * low
+
+    sun.data.angle = math.radians(3.0)
+    _low3, high3 = penumbra_widths(ground_visibility(scene))
+    assert high3 < 0.5 * high
+    assert high3 == pytest.approx(0.8 * 2.0 * 4.0 * math.tan(math.radians(1.5)), rel=0.5)
+
+
+def test_the_soft_umbra_stays_dark_and_open_ground_stays_lit(plates):
+    scene, sun = plates
+    sun.data.angle = math.radians(3.0)
+    vis = ground_visibility(scene)
+    for x in PLATE_X:
+        centre = vis[HEIGHT // 2 - 5:HEIGHT // 2 + 5,
+                     int(WIDTH / 2 + (x - 0.3) * PIXELS_PER_UNIT):
+                     int(WIDTH / 2 + (x + 0.3) * PIXELS_PER_UNIT)]
+        assert centre.max() < 0.05
+    open_ground = vis[:20]                     # 4.5+ units from any plate
+    assert open_ground.min() == 1.0
+
+
+def test_hard_and_pcf_ignore_the_suns_angle(plates):
+    scene, sun = plates
+    sun.data.angle = math.radians(10.0)
+    for filter_name in ('HARD', 'PCF'):
+        scene.csm.shadow_filter = filter_name
+        low, high = penumbra_widths(ground_visibility(scene))
+        assert high <= low + 2.0 / PIXELS_PER_UNIT, (filter_name, low, high)
+    scene.csm.shadow_filter = 'HARD'
+    vis = ground_visibility(scene)
+    assert np.isin(vis, (0.0, 1.0)).mean() > 0.999, "one tap: every pixel lit or not"
+
+
+def test_a_spot_lights_radius_softens_its_shadow(empty_scene):
+    scene = empty_scene
+    add_ground(60)
+    add_box((0.0, 0.0, 3.0), (2.0, 2.0, 0.02), size=1.0).visible_camera = False
+    bpy.ops.object.light_add(type='SPOT', location=(0.0, 0.0, 8.0))
+    spot = bpy.context.object
+    spot.data.energy = 5000.0
+    spot.data.spot_size = math.radians(120.0)
+    camera = add_camera(scene, (0.0, 0.0, 30.0), (0.0, 0.0, 0.0), clip_end=100.0)
+    camera.data.type = 'ORTHO'
+    camera.data.ortho_scale = ORTHO_SCALE
+    scene.csm.shadow_filter = 'SOFT'
+
+    def edge_width(radius):
+        spot.data.shadow_soft_size = radius
+        row = render_scene(scene, WIDTH, HEIGHT)["combined"][HEIGHT // 2, :, 0]
+        lit = row[int(WIDTH / 2 - 3.5 * PIXELS_PER_UNIT)]
+        left = row[int(WIDTH / 2 - 3.5 * PIXELS_PER_UNIT):WIDTH // 2] / max(lit, 1e-6)
+        return np.count_nonzero((left > 0.05) & (left < 0.95)) / PIXELS_PER_UNIT
+
+    sharp, soft = edge_width(0.0), edge_width(1.0)
+    # A sphere of radius 1 at 8 m, the plate's edge 5 m below it, the ground 8 m: similar
+    # triangles give a penumbra 2 * 1 * (8 - 5) / 5 = 1.2 units wide on the ground.
+    assert sharp < 0.25
+    assert soft == pytest.approx(0.8 * 1.2, rel=0.5), (sharp, soft)
+
+
+@pytest.mark.parametrize("shadow_filter", ['PCF', 'SOFT', 'HARD'])
+@pytest.mark.parametrize("elevation", [5.0, 20.0, 45.0, 89.0])
+def test_fully_lit_flat_ground_is_fully_lit(empty_scene, shadow_filter, elevation):
+    """The issue's target: visibility >= 0.999 on 99.9% of lit flat ground, at any sun
+    height, with default settings (the receiver plane removes the filter's stripes)."""
+    scene = empty_scene
+    add_ground(400)
+    azimuth = math.radians(30.0)
+    e = math.radians(elevation)
+    sun = add_sun((-math.cos(e) * math.cos(azimuth), -math.cos(e) * math.sin(azimuth),
+                   -math.sin(e)))
+    sun.data.angle = math.radians(3.0)
+    add_camera(scene, (0, -20, 6), (0, 40, 0), lens=30, clip_end=300)
+    scene.csm.shadow_filter = shadow_filter
+    images = render_scene(scene, 320, 180)
+    ground = images["aux"][..., 3] > 0.5
+    vis = images["aux"][..., 0][ground]
+    assert ground.mean() > 0.5
+    assert np.mean(vis >= 0.999) >= 0.999, (vis.min(), np.mean(vis >= 0.999))
