@@ -456,3 +456,72 @@ def test_checker_at_a_grazing_angle_averages_to_grey_like_eevee(empty_scene, tmp
           f"EEVEE mean {eevee_far.mean():.3f} std {eevee_spread:.4f}")
     assert csm_spread < max(2.0 * eevee_spread, 0.03), (csm_spread, eevee_spread)
     assert csm_far.mean() == pytest.approx(eevee_far.mean(), rel=0.25)
+
+
+def _course_plane_gltf(folder, green, blue):
+    """A 2 x 2 plane (y = 0, facing +Y in the file) whose metallicRoughnessTexture is one
+    colour (0, green, blue), as the course's files store specular and shininess."""
+    import json
+    texture = numpy_image("course_mr", np.tile(np.array((0.0, green, blue, 1.0),
+                                                        dtype=np.float32), (4, 4, 1)))
+    texture.filepath_raw = os.path.join(folder, "course_mr.png")
+    texture.file_format = 'PNG'
+    texture.save()
+    positions = np.array([[-1, 0, -1], [1, 0, -1], [1, 0, 1], [-1, 0, 1]], np.float32)
+    normals = np.tile(np.array([0, 1, 0], np.float32), (4, 1))
+    uvs = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], np.float32)
+    indices = np.array([0, 2, 1, 0, 3, 2], np.uint16)
+    blob = positions.tobytes() + normals.tobytes() + uvs.tobytes() + indices.tobytes()
+    with open(os.path.join(folder, "plane.bin"), "wb") as stream:
+        stream.write(blob)
+    document = {
+        "asset": {"version": "2.0"}, "scene": 0, "scenes": [{"nodes": [0]}],
+        "nodes": [{"name": "plane", "mesh": 0}],
+        "meshes": [{"primitives": [{"attributes": {"POSITION": 0, "NORMAL": 1,
+                                                   "TEXCOORD_0": 2},
+                                    "indices": 3, "material": 0}]}],
+        "materials": [{"name": "course", "pbrMetallicRoughness": {
+            "baseColorFactor": [0.8, 0.8, 0.8, 1.0],
+            "metallicRoughnessTexture": {"index": 0}}}],
+        "textures": [{"source": 0}], "images": [{"uri": "course_mr.png"}],
+        "accessors": [
+            {"bufferView": 0, "componentType": 5126, "count": 4, "type": "VEC3",
+             "min": [-1, 0, -1], "max": [1, 0, 1]},
+            {"bufferView": 1, "componentType": 5126, "count": 4, "type": "VEC3"},
+            {"bufferView": 2, "componentType": 5126, "count": 4, "type": "VEC2"},
+            {"bufferView": 3, "componentType": 5123, "count": 6, "type": "SCALAR"}],
+        "bufferViews": [{"buffer": 0, "byteOffset": 0, "byteLength": 48},
+                        {"buffer": 0, "byteOffset": 48, "byteLength": 48},
+                        {"buffer": 0, "byteOffset": 96, "byteLength": 32},
+                        {"buffer": 0, "byteOffset": 128, "byteLength": 12}],
+        "buffers": [{"uri": "plane.bin", "byteLength": len(blob)}]}
+    path = os.path.join(folder, "plane.gltf")
+    with open(path, "w") as stream:
+        json.dump(document, stream)
+    scene_path = os.path.join(folder, "course.json")
+    with open(scene_path, "w") as stream:
+        json.dump({"camera": {"translate": {"x": 0, "y": 10, "z": 0},
+                              "rotate": {"x": 90, "y": 0, "z": 0},
+                              "near": 0.1, "far": 100, "FOVy": 30},
+                   "objects": [{"mesh": path, "translate": {"x": 0, "y": 0, "z": 0},
+                                "rotate": {"x": 0, "y": 0, "z": 0},
+                                "scale": {"x": 1, "y": 1, "z": 1}}],
+                   "lights": [],
+                   "directional_light": {"direction": {"x": 0, "y": -1, "z": 0},
+                                         "color": {"x": 1, "y": 1, "z": 1}}}, stream)
+    return scene_path
+
+
+def test_course_scene_import_reads_specular_in_blue_and_shininess_in_green(empty_scene,
+                                                                             tmp_path):
+    """A course glTF imported through a scene file: its metallicRoughnessTexture's blue is
+    the specular level and green the shininess (the specular view shows them), not
+    Blender's metallic and roughness."""
+    from csm_engine.blender import scene_builder
+    scene = empty_scene
+    scene_builder.import_scene_file(_course_plane_gltf(str(tmp_path), 0.25, 0.75), scene)
+    scene.csm.debug_view = 'SPECULAR'
+    color = render_scene(scene, 48, 48)["combined"][24, 24, :3]
+    assert color[0] == pytest.approx(0.75, abs=0.02), f"specular from blue: {color}"
+    assert color[1] == pytest.approx(0.25, abs=0.02), f"shininess / 256 from green: {color}"
+    assert color[2] == 0.0, f"not metal although blue is 0.75: {color}"
