@@ -10,7 +10,10 @@ Passes per frame:
 2. G-buffer: albedo+specular, normal+shininess, view depth (0 = background), emission+
    metallic, depth (materials: one uniform block each, core/material_layout.py); world
    positions are rebuilt from view depth in the lighting pass (``world_positions`` here);
-3. lighting: a full-screen pass reading the G-buffer and the atlas (``lighting_frag.glsl``);
+   then, when on, ambient occlusion: a half-resolution horizon search and a depth-aware
+   blur back to full resolution (``ao_frag.glsl``);
+3. lighting: a full-screen pass reading the G-buffer, the atlas and the AO
+   (``lighting_frag.glsl``);
 4. overlays: frozen cascade boxes.
 
 Framebuffers belong to the GPU context that made them, so a ``Pipeline`` is owned by one
@@ -109,6 +112,7 @@ class Pipeline:
         self.profile = False
         self.skip_gpu_calls = False   # benchmark only: a frame of Python without the GPU
         self.gbuffer_fb = None      # kept after draw() for the final render's read-back
+        self.ao_fb = None           # the full-resolution AO of the last frame (None: AO off)
         self.shadow_tiles = {"drawn": 0, "skipped": 0}   # of the last frame
 
     # -- resources ---------------------------------------------------------------------
@@ -329,6 +333,12 @@ class Pipeline:
             gpu.state.depth_test_set('NONE')
         t = self._sync(gbuffer_fb, "gbuffer", t)
 
+        # 2b. Ambient occlusion: skipped, with no texture allocated, when it is off.
+        ambient_occlusion = self._ambient_occlusion(snap, frame_ubo, view_depth, normal,
+                                                    width, height)
+        if ambient_occlusion is not None:
+            t = self._sync(self.ao_fb, "ao", t)
+
         # 3. Lighting (+ debug views) into the target
         lighting = library.get("lighting")
 
@@ -342,6 +352,8 @@ class Pipeline:
             lighting.uniform_sampler("gbuffer_normal", normal)
             lighting.uniform_sampler("gbuffer_depth", view_depth)
             lighting.uniform_sampler("shadow_atlas", atlas)
+            lighting.uniform_sampler("ambient_occlusion",
+                                     white if ambient_occlusion is None else ambient_occlusion)
             lighting.uniform_sampler("gbuffer_emission", emission)
             self._gpu_call(self._fullscreen_batch().draw, lighting)
             if plan.frozen_camera is not None:
@@ -356,6 +368,41 @@ class Pipeline:
         self.gbuffer_fb = gbuffer_fb
         self.timings["total"] = time.perf_counter() - start
         return plan
+
+    def _ambient_occlusion(self, snap, frame_ubo, view_depth, normal, width, height):
+        """The AO pass (ao_frag.glsl): the horizon search at half resolution, then the
+        depth-aware blur back to full resolution. Returns the full-resolution AO texture
+        (1 = open, 0 = occluded), or None when AO is off or its strength is 0, in which
+        case no AO texture is allocated and the lighting pass ignores its sampler."""
+        import gpu
+        self.ao_fb = None
+        settings = snap.settings
+        if not getattr(settings, "ambient_occlusion", False) or \
+                getattr(settings, "ao_strength", 0.0) <= 0.0 or \
+                getattr(settings, "ao_distance", 0.0) <= 0.0:
+            return None
+        half = self._texture("ao_half", ((width + 1) // 2, (height + 1) // 2), 'R32F')
+        full = self._texture("ao", (width, height), 'R32F')
+        half_fb = self._framebuffer("ao_half", colors=(half,))
+        full_fb = self._framebuffer("ao", colors=(full,))
+        library = shaders.LIBRARY
+        for program, fb, size, extra in (
+                ("ao", half_fb, (half.width, half.height), ()),
+                ("ao_blur", full_fb, (width, height), (("ao_half", half),))):
+            shader = library.get(program)
+            with fb.bind():
+                gpu.state.viewport_set(0, 0, *size)
+                gpu.state.depth_test_set('NONE')
+                gpu.state.depth_mask_set(False)
+                shader.bind()
+                shader.uniform_block("frame", frame_ubo)
+                shader.uniform_sampler("gbuffer_depth", view_depth)
+                shader.uniform_sampler("gbuffer_normal", normal)
+                for name, texture in extra:
+                    shader.uniform_sampler(name, texture)
+                self._gpu_call(self._fullscreen_batch().draw, shader)
+        self.ao_fb = full_fb
+        return full
 
     def _draw_casters(self, library, items, world_from_objects, tile, visible, mirrored,
                       cull_front):
@@ -527,11 +574,12 @@ class Pipeline:
     # -- read-back for final renders -----------------------------------------------------
     # What each image is read from: (target, colour slot); the G-buffer's normal target is
     # the pipeline's own, the other two the final target's.
-    READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("gbuffer", 1)}
+    READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("gbuffer", 1),
+             "ao": ("ao", 0)}
 
     def render_offscreen(self, snap, cache, reads=None, with_positions=False):
         """Draw into offscreen float targets and read back only what ``reads`` names:
-        image name ("combined", "aux", "normal") -> channels (1..4, from the first;
+        image name ("combined", "aux", "normal", "ao") -> channels (1..4, from the first;
         default: combined and aux, RGBA). Each image is one read into a new buffer that the
         returned (H, W, channels) float32 array views, without another copy. With
         ``with_positions`` the G-buffer's world positions are added as "position" (tests
@@ -552,7 +600,10 @@ class Pipeline:
         out = {}
         for name, channels in reads.items():
             source, slot = self.READS[name]
-            fb = target if source == "final" else self.gbuffer_fb
+            fb = {"final": target, "gbuffer": self.gbuffer_fb, "ao": self.ao_fb}[source]
+            if fb is None:      # "ao" with AO off: nothing occludes
+                out[name] = np.ones((height, width, channels), dtype=np.float32)
+                continue
             buffer = gpu.types.Buffer('FLOAT', width * height * channels)
             with fb.bind():
                 fb.read_color(0, 0, width, height, channels, slot, 'FLOAT', data=buffer)

@@ -96,6 +96,20 @@ for _name in ("gbuffer", "gbuffer_masked"):
         interface=_spec["interface"] + (("world_tangent", "VEC4", "smooth"),),
         defines=_spec.get("defines", ()) + (("NORMAL_MAP", "1"),))
 
+# Screen-space ambient occlusion (ao_frag.glsl): the horizon search at half resolution,
+# then a depth-aware blur that brings it back to full resolution; lighting multiplies its
+# ambient term by the result.
+_AO_COMMON = dict(vertex="fullscreen_vert.glsl", fragment="ao_frag.glsl",
+                  inputs=(("pos", "VEC2"),), interface=(("screen_uv", "VEC2", "smooth"),),
+                  push=(), frame=True, outputs=(("FLOAT", "out_ao"),))
+PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
+                                            ("FLOAT_2D", "gbuffer_normal")))
+PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
+                                                 ("FLOAT_2D", "gbuffer_normal"),
+                                                 ("FLOAT_2D", "ao_half")),
+                           defines=(("AO_BLUR", "1"),))
+PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),)
+
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
 
 

@@ -85,6 +85,10 @@ void main()
 
   /* A uniform World of radiance L: irradiance pi * L times the Lambert BRDF albedo / pi. */
   vec3 color = frame.ambient_color * albedo;
+  /* Ambient occlusion darkens only this term, as in EEVEE: direct light has its shadows. */
+  float ambient_visibility = frame.ao_enabled != 0 ?
+      mix(1.0, texelFetch(ambient_occlusion, px, 0).r, frame.ao_strength) : 1.0;
+  color *= ambient_visibility;
 
   float sun_vis = 1.0;
   float cascade = -1.0;
@@ -181,6 +185,9 @@ void main()
   }
   else if (debug_view == DEBUG_DEPTH) {
     color = vec3(clamp(view_depth / max(frame.shadow_distance, 1e-6), 0.0, 1.0));
+  }
+  else if (debug_view == DEBUG_AMBIENT_OCCLUSION) {
+    color = vec3(ambient_visibility);
   }
   else if (debug_view == DEBUG_SPECULAR) {
     color = vec3(specular, shininess / 256.0, metallic);
