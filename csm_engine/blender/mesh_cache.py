@@ -2,7 +2,10 @@
 
 Owns the evaluated-mesh -> numpy -> ``GPUBatch`` path and its cache. Every corner (loop) of
 a mesh becomes one vertex (position, split normal, UV), so flat-shaded voxels and UV seams
-come out right; triangles are grouped into one index buffer per material slot.
+come out right; triangles are grouped into one index buffer per material slot. Meshes
+whose materials use a normal map also carry a tangent per corner (``corner_tangents``).
+Materials are read once per sync into ``MaterialInfo`` (``material_info``: what is read and
+what is not is listed in docs/materials.md).
 
 A mesh is uploaded once and re-uploaded only when the depsgraph says its geometry changed
 (``invalidate``); a transform change uploads nothing because matrices are per-draw
