@@ -3,7 +3,9 @@
 Owns the shims: reading mesh data through generic attributes where they exist (3.5+, one
 memory copy) and through the older per-element paths before; corner normals (4.1+) versus
 ``calc_normals_split``; RenderResult passes that take a flat array (4.x+) or rows (3.4);
-the Principled BSDF's renamed specular input; the glTF importer of 3.4/3.5 that needs
+the Principled BSDF's renamed specular and emission inputs; material alpha, shadow and
+culling settings (``blend_method``/``shadow_method`` up to 4.1, ``surface_render_method``/
+``use_transparent_shadow`` from 4.2); MikkTSpace tangents; the glTF importer of 3.4/3.5 that needs
 ``np.bool``; and the exit that pip bpy 4.2 needs to keep a process's exit code. Callers ask
 for what they need and never test versions themselves.
 """
@@ -16,6 +18,66 @@ import numpy as np
 
 # Principled BSDF specular: "Specular IOR Level" in 4.0+, "Specular" before.
 PRINCIPLED_SPECULAR_INPUTS = ("Specular IOR Level", "Specular")
+# Principled BSDF emission colour: "Emission Color" in 4.0+, "Emission" before.
+PRINCIPLED_EMISSION_INPUTS = ("Emission Color", "Emission")
+# Separate RGB (3.4 .. 4.x, outputs R/G/B) and Separate Color (3.3+, Red/Green/Blue).
+SEPARATE_NODE_TYPES = frozenset({'SEPARATE_COLOR', 'SEPRGB'})
+
+
+# -- materials ----------------------------------------------------------------------------
+def material_alpha_mode(material):
+    """How EEVEE of this version draws a material's alpha: 'OPAQUE', 'CLIP' or 'HASHED'.
+
+    NOTE: 4.2+ has no opaque or clip mode: every surface is Dithered (alpha hashed) or
+    Blended, and ``blend_method`` reads HASHED or BLEND (setting CLIP gives HASHED); the
+    glTF importer expresses masks with Math nodes instead (mesh_cache finds their cutoff).
+    3.4 .. 4.1: ``blend_method`` OPAQUE ignores alpha, CLIP cuts out at alpha_threshold,
+    HASHED and BLEND (drawn hashed here) use it."""
+    method = getattr(material, "blend_method", 'OPAQUE')
+    if hasattr(material, "surface_render_method"):          # 4.2+
+        return 'CLIP' if method == 'CLIP' else 'HASHED'
+    return {'OPAQUE': 'OPAQUE', 'CLIP': 'CLIP'}.get(method, 'HASHED')
+
+
+def material_shadow_mode(material, alpha_mode):
+    """How a material's shadow uses alpha: 'NONE' (casts none), 'OPAQUE', 'CLIP' or
+    'HASHED'. 4.2+: Transparent Shadows on follow the surface's alpha, off cast opaque
+    shadows; 3.4 .. 4.1: the material's Shadow Mode."""
+    if hasattr(material, "use_transparent_shadow"):        # 4.2+
+        return alpha_mode if material.use_transparent_shadow else 'OPAQUE'
+    method = getattr(material, "shadow_method", 'OPAQUE')
+    return method if method in {'NONE', 'OPAQUE', 'CLIP', 'HASHED'} else 'OPAQUE'
+
+
+def material_backface_culling_shadow(material):
+    """Backface culling in the shadow pass: 4.2+'s own setting; before, shadows of every
+    material were drawn from both sides."""
+    return bool(getattr(material, "use_backface_culling_shadow", False))
+
+
+def corner_tangents(mesh, uv_name=""):
+    """(L, 4) float32 MikkTSpace tangent (xyz) and bitangent sign (w) of each corner, as
+    Blender computes them for its Normal Map node, or None where Blender cannot: no UV
+    map, or faces of more than four corners (``calc_tangents`` refuses n-gons in 3.4 ..
+    5.0; mesh_cache then computes them with numpy)."""
+    count = len(mesh.loops)
+    if not count or not len(mesh.uv_layers):
+        return None
+    sizes = read_array(mesh.polygons, "loop_total", len(mesh.polygons), np.int32)
+    if len(sizes) and sizes.max() > 4:
+        return None
+    try:
+        if uv_name and mesh.uv_layers.get(uv_name) is not None:
+            mesh.calc_tangents(uvmap=uv_name)
+        else:
+            mesh.calc_tangents()
+    except RuntimeError:
+        return None
+    out = np.empty((count, 4), dtype=np.float32)
+    out[:, :3] = read_array(mesh.loops, "tangent", count * 3, np.float32).reshape(-1, 3)
+    out[:, 3] = read_array(mesh.loops, "bitangent_sign", count, np.float32)
+    mesh.free_tangents()
+    return out
 
 
 # -- mesh data ----------------------------------------------------------------------------

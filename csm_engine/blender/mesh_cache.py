@@ -2,7 +2,10 @@
 
 Owns the evaluated-mesh -> numpy -> ``GPUBatch`` path and its cache. Every corner (loop) of
 a mesh becomes one vertex (position, split normal, UV), so flat-shaded voxels and UV seams
-come out right; triangles are grouped into one index buffer per material slot.
+come out right; triangles are grouped into one index buffer per material slot. Meshes
+whose materials use a normal map also carry a tangent per corner (``corner_tangents``).
+Materials are read once per sync into ``MaterialInfo`` (``material_info``: what is read and
+what is not is listed in docs/materials.md).
 
 A mesh is uploaded once and re-uploaded only when the depsgraph says its geometry changed
 (``invalidate``); a transform change uploads nothing because matrices are per-draw
@@ -42,43 +45,104 @@ def _upstream_image(socket, depth=0):
     return None, None
 
 
-def _alpha_cutoff(material, alpha_socket):
-    """Alpha-mask threshold of a material, in the ways 3.4 .. 5.0 and glTF express it."""
-    method = getattr(material, "blend_method", 'OPAQUE')
-    if method == 'CLIP':
-        return float(getattr(material, "alpha_threshold", 0.5))
+# Output socket names of Separate Color (3.3+) and Separate RGB -> texture channel.
+_CHANNELS = {"Red": 0, "R": 0, "Green": 1, "G": 1, "Blue": 2, "B": 2}
+
+
+def _image_channel(socket, depth=0):
+    """(image, channel) feeding a scalar socket: a Separate Color/RGB output names the
+    channel (Blender's glTF importer wires metallicRoughness so: G -> Roughness, B ->
+    Metallic); an image's Color straight in reads red, its Alpha channel 3. Factors on the
+    way (Math nodes) are passed through. (None, -1) when no image feeds it."""
+    if socket is None or not socket.is_linked or depth > 4:
+        return None, -1
+    link = socket.links[0]
+    node = link.from_node
+    if node.type == 'TEX_IMAGE':
+        return node.image, 3 if link.from_socket.name == "Alpha" else 0
+    if node.type in compat.SEPARATE_NODE_TYPES and getattr(node, "mode", 'RGB') == 'RGB':
+        image, _ = _upstream_image(node.inputs[0], depth + 1)
+        return image, _CHANNELS.get(link.from_socket.name, -1)
+    for candidate in node.inputs:
+        if candidate.is_linked:
+            image, channel = _image_channel(candidate, depth + 1)
+            if image is not None:
+                return image, channel
+    return None, -1
+
+
+def _mask_cutoff(alpha_socket):
+    """The cutoff of a glTF alpha mask expressed as Math nodes (4.2+ importer, e.g.
+    1 - (alpha < cutoff)), or None."""
     if alpha_socket is None or not alpha_socket.is_linked:
-        return 0.0
-    # glTF importer (4.2+) expresses a mask as a Math node (e.g. 1 - (alpha < cutoff)).
+        return None
     node = alpha_socket.links[0].from_node
     for _ in range(3):
-        if node.type == 'MATH':
-            for socket in node.inputs:
-                if not socket.is_linked and 0.0 < socket.default_value < 1.0:
-                    return float(socket.default_value)
-            linked = [s for s in node.inputs if s.is_linked]
-            if not linked:
-                break
-            node = linked[0].links[0].from_node
-        else:
+        if node.type != 'MATH':
             break
-    if method in {'BLEND', 'HASHED'} or alpha_socket.is_linked:
-        return 0.5
-    return 0.0
+        for socket in node.inputs:
+            if not socket.is_linked and 0.0 < socket.default_value < 1.0:
+                return float(socket.default_value)
+        linked = [s for s in node.inputs if s.is_linked]
+        if not linked:
+            break
+        node = linked[0].links[0].from_node
+    return None
+
+
+def _surface_shader(material):
+    """The node that shades a material: what the active Material Output's Surface input
+    is linked to, else the tree's first Principled BSDF."""
+    nodes = material.node_tree.nodes
+    outputs = [n for n in nodes if n.type == 'OUTPUT_MATERIAL']
+    output = next((n for n in outputs if getattr(n, "is_active_output", False)),
+                  outputs[0] if outputs else None)
+    surface = output.inputs.get("Surface") if output is not None else None
+    if surface is not None and surface.is_linked:
+        node = surface.links[0].from_node
+        if node.type in {'BSDF_PRINCIPLED', 'EMISSION'}:
+            return node
+    return next((n for n in nodes if n.type == 'BSDF_PRINCIPLED'), None)
+
+
+def _emission(info, color_socket, strength_socket):
+    """Emission colour x strength (EEVEE's radiance), and an image on the colour."""
+    if color_socket is None:
+        return
+    strength = float(strength_socket.default_value) if strength_socket is not None else 1.0
+    color = tuple(color_socket.default_value)[:3]
+    image, _ = _upstream_image(color_socket)
+    if image is not None:
+        info.emission_image = image
+        color = (1.0, 1.0, 1.0)
+    info.emission = tuple(c * strength for c in color)
 
 
 def material_info(material):
-    """Principled BSDF -> Blinn-Phong parameters (base colour/texture, shininess, mask)."""
+    """What the passes draw of a material (``gpu_mesh.MaterialInfo``): the Principled BSDF's
+    base colour, metallic, roughness, specular, emission and alpha (factors or image
+    textures), a tangent-space Normal Map, or an Emission shader; its alpha, shadow and
+    backface-culling settings. docs/materials.md lists what is read and what is not."""
     info = MaterialInfo()
     if material is None:
         return info
     info.base_color = tuple(material.diffuse_color)
+    info.backface_culling = bool(getattr(material, "use_backface_culling", False))
+    info.backface_culling_shadow = compat.material_backface_culling_shadow(material)
     if not (material.use_nodes and material.node_tree):
-        info.shininess = _shininess(getattr(material, "roughness", 0.5))
+        info.roughness = float(getattr(material, "roughness", 0.5))
+        info.metallic = float(getattr(material, "metallic", 0.0))
         return info
-    bsdf = next((n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED'), None)
-    if bsdf is None:
+    shader = _surface_shader(material)
+    if shader is None:
         return info
+    if shader.type == 'EMISSION':
+        # Light without shading: black to every lamp, its colour x strength as emission.
+        info.base_color = (0.0, 0.0, 0.0, 1.0)
+        info.specular_level = 0.0
+        _emission(info, _find_input(shader, "Color"), _find_input(shader, "Strength"))
+        return info
+    bsdf = shader
     base = _find_input(bsdf, "Base Color")
     info.base_color = tuple(base.default_value)
     image, _ = _upstream_image(base)
@@ -86,25 +150,117 @@ def material_info(material):
         info.image = image
         info.base_color = (1.0, 1.0, 1.0, 1.0)
     roughness = _find_input(bsdf, "Roughness")
-    info.shininess = _shininess(roughness.default_value if roughness is not None else 0.5)
+    metallic = _find_input(bsdf, "Metallic")
+    info.roughness = float(roughness.default_value) if roughness is not None else 0.5
+    info.metallic = float(metallic.default_value) if metallic is not None else 0.0
+    rough_image, rough_channel = _image_channel(roughness)
+    metal_image, metal_channel = _image_channel(metallic)
+    surface_image = rough_image or metal_image
+    if surface_image is not None:
+        info.surface_image = surface_image
+        info.roughness_channel = rough_channel if rough_image is surface_image else -1
+        info.metallic_channel = metal_channel if metal_image is surface_image else -1
+        if material.get("csm_surface_convention") == "COURSE":
+            # The course's files: specular in blue, shininess in green (docs/materials.md).
+            info.surface_convention = "COURSE"
+            info.roughness_channel, info.metallic_channel = 1, 2
     specular = _find_input(bsdf, *compat.PRINCIPLED_SPECULAR_INPUTS)
-    level = float(specular.default_value) if specular is not None and \
-        not specular.is_linked else 0.5
-    # A fully rough surface has no visible highlight; without this, roughness 1 (glTF's
-    # default) gives exponent 1 and washes everything white.
-    r = roughness.default_value if roughness is not None else 0.5
-    info.specular = level * (1.0 - min(max(r, 0.0), 1.0)) ** 2
-    alpha = _find_input(bsdf, "Alpha")
-    if alpha is not None and not alpha.is_linked:
-        info.base_color = info.base_color[:3] + (float(alpha.default_value),)
-    info.alpha_cutoff = _alpha_cutoff(material, alpha)
+    info.specular_level = float(specular.default_value) \
+        if specular is not None and not specular.is_linked else 0.5
+    _emission(info, _find_input(bsdf, *compat.PRINCIPLED_EMISSION_INPUTS),
+              _find_input(bsdf, "Emission Strength"))
+    normal = _find_input(bsdf, "Normal")
+    if normal is not None and normal.is_linked:
+        node = normal.links[0].from_node
+        if node.type == 'NORMAL_MAP' and node.space == 'TANGENT':
+            normal_image, _ = _upstream_image(_find_input(node, "Color"))
+            if normal_image is not None:
+                info.normal_image = normal_image
+                info.normal_strength = float(_find_input(node, "Strength").default_value)
+                info.tangent_uv = node.uv_map or ""
+    _alpha(info, material, _find_input(bsdf, "Alpha"))
     return info
 
 
-def _shininess(roughness):
-    """Map roughness to a Blinn-Phong exponent (Beckmann-style 2/r^4 - 2), clamped."""
-    r = min(max(float(roughness), 0.02), 1.0)
-    return float(min(max(2.0 / (r ** 4) - 2.0, 1.0), 4096.0))
+def _alpha(info, material, alpha_socket):
+    """Alpha as EEVEE draws it: constant alpha counts, an image's alpha when linked."""
+    if alpha_socket is not None and not alpha_socket.is_linked:
+        info.base_color = info.base_color[:3] + (float(alpha_socket.default_value),)
+    has_alpha = alpha_socket is not None and \
+        (alpha_socket.is_linked or alpha_socket.default_value < 1.0)
+    mode = compat.material_alpha_mode(material)
+    threshold = float(getattr(material, "alpha_threshold", 0.5))
+    if mode == 'HASHED':
+        cutoff = _mask_cutoff(alpha_socket)
+        if cutoff is not None:     # a glTF mask (4.2+): a cut-out, as before (Sponza)
+            mode, threshold = 'CLIP', cutoff
+    if not has_alpha:
+        mode = 'OPAQUE'
+    shadow = compat.material_shadow_mode(material, mode)
+    if shadow != 'NONE' and not has_alpha:
+        shadow = 'OPAQUE'
+    info.alpha_mode = mode
+    info.shadow_mode = shadow
+    info.alpha_cutoff = threshold if 'CLIP' in (mode, shadow) else 0.0
+
+
+def corner_tangents(mesh, uv_name, positions, normals, uvs, triangles):
+    """(corners, 4) float32 tangents for a normal-mapped mesh: Blender's MikkTSpace where
+    it computes them (``compat.corner_tangents``), else per-triangle UV gradients summed
+    over the corners that share a vertex and a UV (n-gons), made perpendicular to each
+    corner's normal. w is the bitangent's sign: B = w * cross(N, T)."""
+    tangents = compat.corner_tangents(mesh, uv_name)
+    if tangents is not None:
+        return tangents
+    count = len(positions)
+    out = np.zeros((count, 4), dtype=np.float32)
+    out[:, 3] = 1.0
+    if not count or not len(triangles):
+        return out
+    p = positions[triangles].astype(np.float64)          # (T, 3 corners, xyz)
+    t = uvs[triangles].astype(np.float64)                # (T, 3 corners, uv)
+    e1, e2 = p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]
+    d1, d2 = t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]
+    det = d1[:, 0] * d2[:, 1] - d2[:, 0] * d1[:, 1]
+    scale = np.where(np.abs(det) > 1e-20, 1.0 / np.where(det == 0.0, 1.0, det), 0.0)[:, None]
+    tri_t = (e1 * d2[:, 1:2] - e2 * d1[:, 1:2]) * scale
+    tri_b = (e2 * d1[:, 0:1] - e1 * d2[:, 0:1]) * scale
+    # Corners at one vertex with one UV share a tangent; UV seams keep theirs apart.
+    key = np.concatenate([positions, uvs], axis=1)
+    _, group = np.unique(key, axis=0, return_inverse=True)
+    group = group.ravel()
+    sum_t = np.zeros((group.max() + 1, 3))
+    sum_b = np.zeros_like(sum_t)
+    for corner in range(3):
+        np.add.at(sum_t, group[triangles[:, corner]], tri_t)
+        np.add.at(sum_b, group[triangles[:, corner]], tri_b)
+    n = normals.astype(np.float64)
+    tangent = sum_t[group]
+    tangent -= n * np.sum(n * tangent, axis=1, keepdims=True)
+    length = np.linalg.norm(tangent, axis=1, keepdims=True)
+    out[:, :3] = np.where(length > 1e-12, tangent / np.maximum(length, 1e-12), 0.0)
+    handed = np.sum(np.cross(n, out[:, :3]) * sum_b[group], axis=1)
+    out[:, 3] = np.where(handed < 0.0, -1.0, 1.0)
+    return out
+
+
+def tangent_uv(materials):
+    """The UV map name the mesh's tangents follow ("" = the active one), or None when no
+    material of the mesh uses a normal map (then it carries no tangents at all)."""
+    for info in materials:
+        if info.needs_tangents:
+            return info.tangent_uv or ""
+    return None
+
+
+def _memo_material_info(memo, material):
+    """``material_info`` once per material and sync: slots sharing a material share one
+    MaterialInfo (and so one uniform buffer on the GPU)."""
+    key = material.as_pointer() if material is not None else 0
+    info = memo.get(key)
+    if info is None:
+        info = memo[key] = material_info(material)
+    return info
 
 
 def read_arrays(mesh):
@@ -176,6 +332,17 @@ def extract_arrays(mesh, raw=None):
         bounds = (np.zeros(3, np.float32), np.zeros(3, np.float32))
     return (np.ascontiguousarray(positions), normals, uvs, triangles.reshape(-1, 3),
             material_index, bounds)
+
+
+def _upload_mesh(mesh, materials, raw=None):
+    """Read and upload one evaluated mesh; tangents only when a material needs them."""
+    arrays = extract_arrays(mesh, raw)
+    uv_name = tangent_uv(materials)
+    tangents = None
+    if uv_name is not None:
+        positions, normals, uvs, triangles = arrays[:4]
+        tangents = corner_tangents(mesh, uv_name, positions, normals, uvs, triangles)
+    return upload(*arrays, materials, tangents=tangents)
 
 
 @contextlib.contextmanager
@@ -339,19 +506,27 @@ class MeshCache:
         for key in [k for k in self.meshes if k not in mesh_sources]:
             del self.meshes[key]   # deleted objects: drop their buffers
         stats = {"read": 0, "uploaded": 0, "reused": 0}
+        memo = {}
         for key, obj in mesh_sources.items():
+            materials = None
             if key in self.meshes and key not in self._dirty:
-                if self._materials_dirty:
-                    self.meshes[key].materials = [
-                        material_info(slot.material) for slot in obj.material_slots]
-                stats["reused"] += 1
-                continue
+                if not self._materials_dirty:
+                    stats["reused"] += 1
+                    continue
+                materials = [_memo_material_info(memo, slot.material)
+                             for slot in obj.material_slots]
+                # A normal map added or removed changes the vertex format: read it again.
+                if (tangent_uv(materials) is not None) == self.meshes[key].has_tangents:
+                    self.meshes[key].materials = materials
+                    stats["reused"] += 1
+                    continue
             with evaluated_mesh(obj, self.realize) as mesh:
                 if mesh is None:
                     continue
-                arrays = extract_arrays(mesh)
-                materials = [material_info(slot.material) for slot in obj.material_slots]
-                self.meshes[key] = upload(*arrays, materials)
+                if materials is None:
+                    materials = [_memo_material_info(memo, slot.material)
+                                 for slot in obj.material_slots]
+                self.meshes[key] = _upload_mesh(mesh, materials)
                 stats["read"] += 1
                 stats["uploaded"] += 1
         self._dirty.clear()
@@ -365,15 +540,20 @@ class MeshCache:
         meshes, geometry, recipes = {}, {}, {}
         by_pointer = {}           # one depsgraph: the same evaluated mesh is read once
         stats = {"read": 0, "uploaded": 0, "reused": 0, "unread": 0}
+        memo = {}
         for key, obj in mesh_sources.items():
-            materials = [material_info(slot.material) for slot in obj.material_slots]
+            materials = [_memo_material_info(memo, slot.material)
+                         for slot in obj.material_slots]
+            # Normal-mapped meshes carry tangents (along one UV map), the others none: part
+            # of what makes two meshes' GPU geometry the same.
+            tangents = tangent_uv(materials)
             # NOTE: reading an evaluated mesh makes Blender finish evaluating it (a
             # Subdivision modifier runs when ``data`` is first read: ~80 ms a Suzanne at
             # level 2 here), so a mesh whose inputs are unchanged is not read at all.
             made_of = recipe(obj, simplify) if not self.realize else None
             previous = self._recipes.get(key)
             if made_of is not None and previous is not None and previous[0] == made_of \
-                    and previous[1] in self._geometry:
+                    and previous[1] in self._geometry and previous[1][2] == tangents:
                 known = self._geometry[previous[1]]
                 geometry[previous[1]] = known
                 recipes[key] = previous
@@ -388,22 +568,22 @@ class MeshCache:
                     continue
                 # Triangles are split into one index buffer per material slot, so the slot
                 # count is part of what makes two meshes' GPU geometry the same.
-                memo = (mesh.as_pointer(), len(materials)) if in_place else None
-                known = by_pointer.get(memo) if memo is not None else None
+                read_once = (mesh.as_pointer(), len(materials), tangents) if in_place else None
+                known = by_pointer.get(read_once) if read_once is not None else None
                 if known is None:
                     raw = read_arrays(mesh)
                     stats["read"] += 1
-                    key_hash = (fingerprint(raw, mesh), len(materials))
+                    key_hash = (fingerprint(raw, mesh), len(materials), tangents)
                     known = geometry.get(key_hash) or self._geometry.get(key_hash) or \
                         self._older.get(key_hash)
                     if known is None:
-                        known = upload(*extract_arrays(mesh, raw), materials)
+                        known = _upload_mesh(mesh, materials, raw)
                         stats["uploaded"] += 1
                     else:
                         stats["reused"] += 1
                     geometry[key_hash] = known
-                    if memo is not None:
-                        by_pointer[memo] = (known, key_hash)
+                    if read_once is not None:
+                        by_pointer[read_once] = (known, key_hash)
                 else:
                     known, key_hash = known
                     stats["reused"] += 1

@@ -595,7 +595,23 @@ def _import_mesh(planned, collection, scene_path):
             obj.parent = parent
             obj.matrix_parent_inverse = mathutils.Matrix.Identity(4)
             obj.matrix_basis = basis
+    if os.path.splitext(planned.mesh_path)[1].lower() in (".gltf", ".glb"):
+        _tag_course_materials(new_objects)
     return parent, new_objects
+
+
+# NOTE: the course's glTF files keep specular in the blue and shininess in the green channel
+# of metallicRoughnessTexture (docs/scene-format.md), which Blender's importer wires to
+# Metallic and Roughness; this tag makes mesh_cache read them the course's way
+# (docs/materials.md). Materials made or imported any other way keep Blender's meaning.
+COURSE_SURFACE_TAG = ("csm_surface_convention", "COURSE")
+
+
+def _tag_course_materials(objects):
+    for obj in objects:
+        for slot in getattr(obj, "material_slots", ()):
+            if slot.material is not None:
+                slot.material[COURSE_SURFACE_TAG[0]] = COURSE_SURFACE_TAG[1]
 
 
 def _copy_import(planned, first_parent, first_objects, unlinked):

@@ -45,6 +45,8 @@ DEBUG_VIEWS_LABELS = {
     'POSITION': ("G-buffer: position", "World position in repeating bands 1/20 of the shadow distance wide"),
     'DEPTH': ("G-buffer: depth", "View depth, normalised to the shadow distance"),
     'SPECULAR': ("G-buffer: specular", "Specular strength (red) and shininess / 256 (green)"),
+    'AMBIENT_OCCLUSION': ("Ambient occlusion", "The factor the ambient light is multiplied by: "
+                                               "white open, black fully occluded"),
 }
 
 LIGHT_FALLOFFS_LABELS = {
@@ -241,6 +243,25 @@ class CSMSettings(bpy.types.PropertyGroup):
         name="Ambient", default=1.0, min=0.0, soft_max=10.0, update=_redraw,
         description="Multiplier (0 or more) on the World colour used as ambient light. "
                     "Higher: brighter shadows and flatter shading; 0: shadows are black")
+    # NOTE: CSM keeps its own AO settings rather than reading EEVEE's (scene.eevee.gtao_*):
+    # EEVEE's panel is hidden while CSM renders, and the settings moved between versions
+    # (3.4's gtao_distance, deprecated in 4.2, gone in 5.0 for the horizon scan's
+    # fast_gi_distance). Distance defaults to EEVEE's 0.2 m, the screen-space peer; Cycles'
+    # World AO distance (10 m) is beyond what a screen-space search can see.
+    ambient_occlusion: BoolProperty(
+        name="Ambient Occlusion", default=True, update=_redraw,
+        description="Darken the ambient (World) light where nearby surfaces hide the sky: "
+                    "creases, corners and contacts, as Cycles' AO. Screen space, half "
+                    "resolution; off skips the pass")
+    ao_distance: FloatProperty(
+        name="Distance", default=0.2, min=0.0, soft_max=100.0, unit='LENGTH',
+        update=_redraw,
+        description="How far (scene units) a surface can be and still occlude, as Cycles' "
+                    "World AO distance. Larger: wider, softer darkening")
+    ao_strength: FloatProperty(
+        name="Strength", default=1.0, min=0.0, max=1.0, subtype='FACTOR', update=_redraw,
+        description="How much of the occlusion is applied, 0 to 1: 0 = none, "
+                    "1 = the full occlusion (as Cycles' AO pass)")
     # NOTE: the default keeps both worlds right at once: a scene built in Blender looks as
     # in EEVEE (inverse square, watts), an imported course scene as the course's programs.
     light_falloff: EnumProperty(

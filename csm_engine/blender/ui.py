@@ -86,6 +86,12 @@ def draw_light(layout, context):
         col.operator("csm.reset_sun_direction", icon='FILE_REFRESH')
     col.separator()
     col.prop(context.scene.csm, "ambient_strength")
+    csm = context.scene.csm
+    col.prop(csm, "ambient_occlusion")
+    row = col.row(align=True)
+    row.active = csm.ambient_occlusion
+    row.prop(csm, "ao_distance")
+    row.prop(csm, "ao_strength")
     col.prop(context.scene.csm, "light_falloff")
     col.prop(context.scene.render, "film_transparent")
 

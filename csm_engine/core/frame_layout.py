@@ -24,7 +24,7 @@ MAX_SHADOW_TILES = MAX_CASCADES + MAX_SPOT_LIGHTS   # one tile per cascade and s
 # Identifiers as the Blender settings spell them (EnumProperty items); the GLSL value of
 # each is its position here, so only ever append.
 DEBUG_VIEWS = ("NONE", "CASCADES", "SHADOW_FACTOR", "SHADOW_MAP", "TEXEL_DENSITY", "ALBEDO",
-               "NORMAL", "POSITION", "DEPTH", "SPECULAR")
+               "NORMAL", "POSITION", "DEPTH", "SPECULAR", "AMBIENT_OCCLUSION")
 PCF_PATTERNS = ("GRID", "CROSS5", "NINE_TAP")
 SPLIT_SCHEMES = ("UNIFORM", "LOG", "HYBRID", "MANUAL")
 # How a point or spot light dims with distance (docs/lighting.md): PHYSICAL is EEVEE's
@@ -364,4 +364,12 @@ FRAME_LAYOUT = UniformLayout("FrameData", (
      "atlas tiles: one per cascade, then one per shadowed spot light"),
     ("point_lights", POINT_LIGHT_LAYOUT, MAX_POINT_LIGHTS, "point lights in use first"),
     ("spot_lights", SPOT_LIGHT_LAYOUT, MAX_SPOT_LIGHTS, "spot lights in use first"),
+    # Screen-space ambient occlusion (ao_frag.glsl); packed by shadow_plan.pack_frame.
+    ("ao_enabled", "int", "1: the ambient term is multiplied by the AO texture"),
+    ("ao_distance", "float", "AO distance: farther surfaces do not occlude (scene units)"),
+    ("ao_strength", "float", "AO blend, 0 (no effect) to 1 (the full occlusion)"),
+    ("ao_pixels_per_unit", "float", "pixels one scene unit spans at view depth 1 "
+                                    "(perspective) or anywhere (orthographic)"),
+    ("ao_view_ray", "vec4", "view-space xy of a pixel = ndc * xy + zw, times the view "
+                            "depth for a perspective camera"),
 ))

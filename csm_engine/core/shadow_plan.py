@@ -194,6 +194,28 @@ def sun_tan_half_angle(sun):
     return math.tan(0.5 * angle)
 
 
+def ambient_occlusion_fields(snap):
+    """The frame block's ``ao_*`` fields: the AO settings, and what ao_frag.glsl needs to
+    turn a pixel and its view depth into a view-space point and a distance into pixels."""
+    s = snap.settings
+    camera = snap.camera
+    enabled = bool(getattr(s, "ambient_occlusion", False))
+    clip_from_view = np.asarray(camera.clip_from_world, dtype=np.float64) @ \
+        np.asarray(camera.world_from_view, dtype=np.float64)
+    p = clip_from_view
+    if camera.is_perspective:
+        # ndc = (P00 x + P02 z) / -z with z = -depth: x = depth * (ndc + P02) / P00.
+        view_ray = (1.0 / p[0, 0], 1.0 / p[1, 1], p[0, 2] / p[0, 0], p[1, 2] / p[1, 1])
+    else:
+        # ndc = P00 x + P03: x = (ndc - P03) / P00.
+        view_ray = (1.0 / p[0, 0], 1.0 / p[1, 1], -p[0, 3] / p[0, 0], -p[1, 3] / p[1, 1])
+    return dict(ao_enabled=int(enabled),
+                ao_distance=float(getattr(s, "ao_distance", 0.0)),
+                ao_strength=float(getattr(s, "ao_strength", 0.0)) if enabled else 0.0,
+                ao_pixels_per_unit=0.5 * camera.height * abs(p[1, 1]),
+                ao_view_ray=view_ray)
+
+
 def pack_frame(snap, plan):
     """The frame uniform block for this frame (std140 float32 array, ``FRAME_LAYOUT``)."""
     s = snap.settings
@@ -260,6 +282,7 @@ def pack_frame(snap, plan):
         debug_inset=int(bool(s.debug_inset)),
         cascades=cascade_rows,
         shadow_tiles=tile_rows,
+        **ambient_occlusion_fields(snap),
         point_lights=point_rows,
         spot_lights=spot_rows,
     ))

@@ -1,7 +1,9 @@
 """Meshes on the GPU: numpy arrays -> one vertex buffer and an index buffer per material.
 
-Owns ``GPUMesh`` and ``upload``; ``UPLOADS`` counts uploads so tests and the benchmark can
-prove that unchanged meshes are not uploaded again.
+Owns ``GPUMesh``, ``MaterialInfo`` (what the passes read of one material slot) and
+``upload``; ``UPLOADS`` counts uploads (and bytes) so tests and the benchmark can prove that
+unchanged meshes are not uploaded again. Only meshes whose materials use a normal map carry
+per-corner tangents (16 more bytes a corner).
 """
 
 from dataclasses import dataclass, field
@@ -15,16 +17,40 @@ UPLOADS = {"count": 0, "bytes": 0}
 # tile drawn from the same serials, matrices and light matrix need not be drawn again.
 _NEXT_SERIAL = [1]
 BYTES_PER_CORNER = 32       # position + normal + uv, float32 (see _vertex_format)
+BYTES_PER_TANGENT = 16      # tangent xyz + bitangent sign, float32, normal-mapped meshes only
 BYTES_PER_TRIANGLE = 12     # three int32 indices
 
 
-@dataclass
+@dataclass(eq=False)
 class MaterialInfo:
-    base_color: tuple = (0.8, 0.8, 0.8, 1.0)
-    image: object = None          # bpy.types.Image or None
-    shininess: float = 32.0
-    specular: float = 0.5
-    alpha_cutoff: float = 0.0     # 0 = opaque; >0 = alpha-masked (cutout)
+    """One material slot as the passes draw it (read by ``blender/mesh_cache.py``); images
+    are ``bpy.types.Image`` or None, factors multiply their texture. Units and meanings are
+    those of ``core/material_layout.py``'s MATERIAL_LAYOUT."""
+    base_color: tuple = (0.8, 0.8, 0.8, 1.0)     # linear rgb, alpha
+    image: object = None                         # base-colour image
+    metallic: float = 0.0
+    roughness: float = 0.5
+    specular_level: float = 0.5
+    emission: tuple = (0.0, 0.0, 0.0)            # colour x strength, W/m^2/sr
+    emission_image: object = None
+    normal_image: object = None                  # tangent-space normal map (Non-Color)
+    normal_strength: float = 1.0
+    tangent_uv: object = None                    # UV map name the tangents follow, when
+                                                 # normal_image is set ("" = active)
+    surface_image: object = None                 # the metallic-roughness image
+    surface_convention: str = "PRINCIPLED"       # or "COURSE" (docs/materials.md)
+    roughness_channel: int = -1                  # surface_image channel, -1 none
+    metallic_channel: int = -1
+    alpha_mode: str = "OPAQUE"                   # OPAQUE, CLIP, HASHED
+    alpha_cutoff: float = 0.0                    # CLIP threshold
+    shadow_mode: str = "OPAQUE"                  # NONE, OPAQUE, CLIP, HASHED
+    backface_culling: bool = False               # camera passes
+    backface_culling_shadow: bool = False        # shadow pass
+    gpu_block: object = None                     # the pipeline's (flags, GPUUniformBuf)
+
+    @property
+    def needs_tangents(self):
+        return self.normal_image is not None
 
 
 @dataclass
@@ -37,24 +63,32 @@ class GPUMesh:
     vertex_buffer: object = None
     index_buffers: list = field(default_factory=list)
     serial: int = 0                # unique per upload (see _NEXT_SERIAL)
+    has_tangents: bool = False     # the vertex buffer has "tan" (normal-mapped materials)
 
 
-def _vertex_format():
+def _vertex_format(with_tangents=False):
     import gpu
     fmt = gpu.types.GPUVertFormat()
     fmt.attr_add(id="pos", comp_type='F32', len=3, fetch_mode='FLOAT')
     fmt.attr_add(id="nor", comp_type='F32', len=3, fetch_mode='FLOAT')
     fmt.attr_add(id="uv", comp_type='F32', len=2, fetch_mode='FLOAT')
+    if with_tangents:
+        fmt.attr_add(id="tan", comp_type='F32', len=4, fetch_mode='FLOAT')
     return fmt
 
 
-def upload(positions, normals, uvs, triangles, material_index, object_bounds, materials):
-    """Numpy arrays -> one vertex buffer and an index buffer per used material slot."""
+def upload(positions, normals, uvs, triangles, material_index, object_bounds, materials,
+           tangents=None):
+    """Numpy arrays -> one vertex buffer and an index buffer per used material slot.
+    ``tangents``: (corners, 4) float32 tangent and bitangent sign, or None."""
     import gpu
-    vbo = gpu.types.GPUVertBuf(_vertex_format(), len(positions))
+    with_tangents = tangents is not None
+    vbo = gpu.types.GPUVertBuf(_vertex_format(with_tangents), len(positions))
     vbo.attr_fill("pos", positions)
     vbo.attr_fill("nor", np.ascontiguousarray(normals))
     vbo.attr_fill("uv", np.ascontiguousarray(uvs))
+    if with_tangents:
+        vbo.attr_fill("tan", np.ascontiguousarray(tangents, dtype=np.float32))
     batches, ibos = [], []
     if len(triangles):
         slot_count = max(len(materials), 1)
@@ -74,9 +108,10 @@ def upload(positions, normals, uvs, triangles, material_index, object_bounds, ma
     UPLOADS["count"] += 1
     serial = _NEXT_SERIAL[0]
     _NEXT_SERIAL[0] += 1
-    UPLOADS["bytes"] += len(positions) * BYTES_PER_CORNER + len(triangles) * BYTES_PER_TRIANGLE
+    UPLOADS["bytes"] += len(positions) * (BYTES_PER_CORNER + with_tangents * BYTES_PER_TANGENT) \
+        + len(triangles) * BYTES_PER_TRIANGLE
     return GPUMesh(batches=batches, materials=list(materials),
                    aabb_min=aabb_min.astype(np.float64), aabb_max=aabb_max.astype(np.float64),
                    triangle_count=len(triangles), vertex_buffer=vbo, index_buffers=ibos,
-                   serial=serial)
+                   serial=serial, has_tangents=with_tangents)
 

@@ -7,9 +7,13 @@ own (``view_draw``) or an offscreen one that ``render()`` reads back. Both go th
 
 Passes per frame:
 1. shadow: one depth-only tile per cascade (and per shadowed spot light) in one atlas;
-2. G-buffer: albedo+specular, normal+shininess, view depth (0 = background), depth; world
+2. G-buffer: albedo+specular, normal+shininess, view depth (0 = background), emission+
+   metallic, depth (materials: one uniform block each, core/material_layout.py); world
    positions are rebuilt from view depth in the lighting pass (``world_positions`` here);
-3. lighting: a full-screen pass reading the G-buffer and the atlas (``lighting_frag.glsl``);
+   then, when on, ambient occlusion: a half-resolution horizon search and a depth-aware
+   blur back to full resolution (``ao_frag.glsl``);
+3. lighting: a full-screen pass reading the G-buffer, the atlas and the AO
+   (``lighting_frag.glsl``);
 4. overlays: frozen cascade boxes.
 
 Framebuffers belong to the GPU context that made them, so a ``Pipeline`` is owned by one
@@ -24,7 +28,9 @@ from ..core import cascades
 from ..core.camera import world_positions
 from ..core.shadow_plan import (CASCADE_LINE_COLORS, front_to_back, instance_bounds,
                                 layout_atlas, pack_frame, plan_shadows)
+from ..core.material_layout import pack_material
 from . import shaders
+from .gpu_mesh import MaterialInfo
 from .result import RenderResult
 
 
@@ -63,6 +69,29 @@ def _same_tile(held, signature):
                 and np.abs(a[2] - b[2]).max() <= TILE_DEPTH_TOLERANCE)
 
 
+# The G-buffer programs' material samplers, in _DrawMaterial.textures order.
+_MATERIAL_SAMPLERS = ("base_color_texture", "normal_texture", "emission_texture",
+                      "surface_texture")
+# Slots without a material draw as Blender's default grey.
+_DEFAULT_MATERIAL = MaterialInfo()
+
+
+class _DrawMaterial:
+    """One material slot ready to draw: its uniform buffer, its four textures (white where
+    there is none, see _MATERIAL_SAMPLERS), alpha and shadow modes, culling, and the key a
+    shadow tile records of it."""
+    __slots__ = ("block", "textures", "alpha_mode", "shadow_mode", "backface_culling",
+                 "backface_culling_shadow", "shadow_key")
+
+    def __init__(self, block, textures, alpha_mode, shadow_mode, backface_culling,
+                 backface_culling_shadow, shadow_key):
+        self.block, self.textures = block, textures
+        self.alpha_mode, self.shadow_mode = alpha_mode, shadow_mode
+        self.backface_culling = backface_culling
+        self.backface_culling_shadow = backface_culling_shadow
+        self.shadow_key = shadow_key
+
+
 class RenderTargetError(Exception):
     """A render target or shadow map could not be allocated; the message says which and
     how large."""
@@ -84,6 +113,7 @@ class Pipeline:
         self.skip_gpu_calls = False   # benchmark only: a frame of Python without the GPU
         self.gbuffer_fb = None      # kept after draw() for the final render's read-back
         self._combined_fb = None    # what holds the final Combined image, when not "final"
+        self.ao_fb = None           # the full-resolution AO of the last frame (None: AO off)
         self.shadow_tiles = {"drawn": 0, "skipped": 0}   # of the last frame
 
     # -- resources ---------------------------------------------------------------------
@@ -204,6 +234,9 @@ class Pipeline:
         world_from_objects = np.array([i.world_from_object for i in snap.instances],
                                       dtype=np.float64).reshape(-1, 4, 4)
         world_from_objects_gl = _column_major_stack(world_from_objects)
+        # Negative scale turns a triangle's winding around: back-face culling of a mirrored
+        # instance culls its front-wound faces.
+        mirrored = np.linalg.det(world_from_objects[:, :3, :3]) < 0.0
 
         # 1. Shadow atlas: only tiles whose contents would change are cleared and drawn.
         t = time.perf_counter()
@@ -253,7 +286,8 @@ class Pipeline:
                     # the next frame draws it again.
                     held.pop(key, None)
                 if len(visible):
-                    self._draw_casters(library, items, world_from_objects, tile, visible)
+                    self._draw_casters(library, items, world_from_objects, tile, visible,
+                                       mirrored, cull_front)
                 if not self.skip_gpu_calls:
                     held[key] = signature
             gpu.state.face_culling_set('NONE')
@@ -264,8 +298,9 @@ class Pipeline:
         normal = self._texture("normal", (width, height), 'RGBA16F')
         view_depth = self._texture("view_depth", (width, height), 'R32F')
         depth = self._texture("depth", (width, height), 'DEPTH_COMPONENT32F')
+        emission = self._texture("emission", (width, height), 'RGBA16F')
         gbuffer_fb = self._framebuffer("gbuffer", depth=depth,
-                                       colors=(albedo, normal, view_depth))
+                                       colors=(albedo, normal, view_depth, emission))
         # Near to far, so the early depth test skips the shading of hidden fragments.
         order = np.asarray(front_to_back(snap, bounds_lo_hi), dtype=np.int64)
         order = order[np.array([i.visible_camera for i in snap.instances], dtype=bool)[order]]
@@ -274,22 +309,45 @@ class Pipeline:
             self._gpu_call(gbuffer_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
             gpu.state.depth_test_set('LESS_EQUAL')
             gpu.state.depth_mask_set(True)
-            for masked in (False, True):
-                gbuffer = library.get("gbuffer_masked" if masked else "gbuffer")
-                gbuffer.bind()
-                gbuffer.uniform_block("frame", frame_ubo)
+            culling = 'NONE'
+            # Opaque before alpha-tested; meshes with tangents (normal maps) use the
+            # programs that read them.
+            for masked, tangents in ((False, False), (False, True), (True, False),
+                                     (True, True)):
+                gbuffer = None
                 for index in order:
-                    draws = items[index][masked]
-                    if not draws:
+                    entry = items[index]
+                    draws = entry[masked]
+                    if not draws or entry[4] != tangents:
                         continue
+                    if gbuffer is None:
+                        gbuffer = library.get("gbuffer" + ("_masked" if masked else "") +
+                                              ("_tangent" if tangents else ""))
+                        gbuffer.bind()
+                        gbuffer.uniform_block("frame", frame_ubo)
+                        bound = None
                     gbuffer.uniform_float("world_from_object", world_from_objects_gl[index])
-                    for batch, texture, color, params in draws:
-                        gbuffer.uniform_float("base_color", color)
-                        gbuffer.uniform_float("material_params", params)
-                        gbuffer.uniform_sampler("base_color_texture", texture)
+                    for batch, material in draws:
+                        wanted = ('FRONT' if mirrored[index] else 'BACK') \
+                            if material.backface_culling else 'NONE'
+                        if wanted != culling:
+                            gpu.state.face_culling_set(wanted)
+                            culling = wanted
+                        if material is not bound:
+                            gbuffer.uniform_block("material", material.block)
+                            for name, texture in zip(_MATERIAL_SAMPLERS, material.textures):
+                                gbuffer.uniform_sampler(name, texture)
+                            bound = material
                         self._gpu_call(batch.draw, gbuffer)
+            gpu.state.face_culling_set('NONE')
             gpu.state.depth_test_set('NONE')
         t = self._sync(gbuffer_fb, "gbuffer", t)
+
+        # 2b. Ambient occlusion: skipped, with no texture allocated, when it is off.
+        ambient_occlusion = self._ambient_occlusion(snap, frame_ubo, view_depth, normal,
+                                                    width, height)
+        if ambient_occlusion is not None:
+            t = self._sync(self.ao_fb, "ao", t)
 
         # 3. Lighting (+ debug views) into the target
         lighting = library.get("lighting")
@@ -304,6 +362,9 @@ class Pipeline:
             lighting.uniform_sampler("gbuffer_normal", normal)
             lighting.uniform_sampler("gbuffer_depth", view_depth)
             lighting.uniform_sampler("shadow_atlas", atlas)
+            lighting.uniform_sampler("ambient_occlusion",
+                                     white if ambient_occlusion is None else ambient_occlusion)
+            lighting.uniform_sampler("gbuffer_emission", emission)
             self._gpu_call(self._fullscreen_batch().draw, lighting)
             if overlays and plan.frozen_camera is not None:
                 self._draw_frozen(snap, plan)
@@ -318,23 +379,72 @@ class Pipeline:
         self.timings["total"] = time.perf_counter() - start
         return plan
 
-    def _draw_casters(self, library, items, world_from_objects, tile, visible):
+    def _ambient_occlusion(self, snap, frame_ubo, view_depth, normal, width, height):
+        """The AO pass (ao_frag.glsl): the horizon search at half resolution, then the
+        depth-aware blur back to full resolution. Returns the full-resolution AO texture
+        (1 = open, 0 = occluded), or None when AO is off or its strength is 0, in which
+        case no AO texture is allocated and the lighting pass ignores its sampler."""
+        import gpu
+        self.ao_fb = None
+        settings = snap.settings
+        if not getattr(settings, "ambient_occlusion", False) or \
+                getattr(settings, "ao_strength", 0.0) <= 0.0 or \
+                getattr(settings, "ao_distance", 0.0) <= 0.0:
+            return None
+        half = self._texture("ao_half", ((width + 1) // 2, (height + 1) // 2), 'R32F')
+        full = self._texture("ao", (width, height), 'R32F')
+        half_fb = self._framebuffer("ao_half", colors=(half,))
+        full_fb = self._framebuffer("ao", colors=(full,))
+        library = shaders.LIBRARY
+        for program, fb, size, extra in (
+                ("ao", half_fb, (half.width, half.height), ()),
+                ("ao_blur", full_fb, (width, height), (("ao_half", half),))):
+            shader = library.get(program)
+            with fb.bind():
+                gpu.state.viewport_set(0, 0, *size)
+                gpu.state.depth_test_set('NONE')
+                gpu.state.depth_mask_set(False)
+                shader.bind()
+                shader.uniform_block("frame", frame_ubo)
+                shader.uniform_sampler("gbuffer_depth", view_depth)
+                shader.uniform_sampler("gbuffer_normal", normal)
+                for name, texture in extra:
+                    shader.uniform_sampler(name, texture)
+                self._gpu_call(self._fullscreen_batch().draw, shader)
+        self.ao_fb = full_fb
+        return full
+
+    def _draw_casters(self, library, items, world_from_objects, tile, visible, mirrored,
+                      cull_front):
+        import gpu
         clip_from_objects = _column_major_stack(tile.clip_from_world @
                                                 world_from_objects[visible])
+        default = 'FRONT' if cull_front else 'NONE'
+        culling = default
         for masked in (False, True):
             shadow = library.get("shadow_masked" if masked else "shadow")
             shadow.bind()
+            bound = None
             for row, index in enumerate(visible):
-                draws = items[index][masked]
+                draws = items[index][2 + masked]
                 if not draws:
                     continue
                 shadow.uniform_float("clip_from_object", clip_from_objects[row])
-                for batch, texture, color, params in draws:
-                    if masked:   # the opaque program has no material inputs
-                        shadow.uniform_float("material_params",
-                                             (0.0, color[3], params[2], params[3]))
-                        shadow.uniform_sampler("base_color_texture", texture)
+                for batch, material in draws:
+                    # 4.2+ "Backface Culling" of shadows: the faces turned away from the
+                    # light (the winding turned around for a mirrored instance).
+                    wanted = ('FRONT' if mirrored[index] else 'BACK') \
+                        if material.backface_culling_shadow else default
+                    if wanted != culling:
+                        gpu.state.face_culling_set(wanted)
+                        culling = wanted
+                    if masked and material is not bound:   # the opaque program has none
+                        shadow.uniform_block("material", material.block)
+                        shadow.uniform_sampler("base_color_texture", material.textures[0])
+                        bound = material
                     self._gpu_call(batch.draw, shadow)
+        if culling != default:
+            gpu.state.face_culling_set(default)
 
     def _atlas_contents(self, atlas):
         """What each tile of ``atlas`` holds: (origin, resolution) -> the signature it was
@@ -354,12 +464,12 @@ class Pipeline:
         a held signature: the image may have been edited in place."""
         per_key = {}
         signatures = []
-        for instance, (_opaque, masked) in zip(snap.instances, items):
+        for instance, entry in zip(snap.instances, items):
             if instance.key not in per_key:
                 mesh = cache.meshes.get(instance.key)
-                signature = (mesh.serial if mesh is not None else 0,
-                             tuple((color[3], params[2]) for _b, _t, color, params in masked))
-                if any(params[3] > 0.0 for _b, _t, _c, params in masked):
+                keys = tuple(material.shadow_key for _b, material in entry[2] + entry[3])
+                signature = (mesh.serial if mesh is not None else 0, keys)
+                if None in keys:
                     signature = None
                 per_key[instance.key] = signature
             signatures.append(per_key[instance.key])
@@ -382,32 +492,67 @@ class Pipeline:
         return np.nonzero(mask)[0]
 
     def _draw_items(self, snap, cache, white):
-        """Per instance: (opaque draws, alpha-masked draws), each a list of (batch, texture,
-        base colour, material parameters); instances of one mesh share the lists."""
+        """Per instance: (camera opaque draws, camera alpha-tested draws, shadow opaque
+        draws, shadow alpha-tested draws, whether the mesh has tangents); each draw is
+        (batch, ``_DrawMaterial``). Instances of one mesh share the lists."""
         per_mesh = {}
         items = []
         for instance in snap.instances:
             entry = per_mesh.get(instance.key)
             if entry is None:
                 mesh = cache.meshes.get(instance.key)
-                entry = ([], [])
+                entry = ([], [], [], [], bool(mesh is not None and mesh.has_tangents))
                 for batch, slot in (mesh.batches if mesh is not None else ()):
-                    texture, color, params = self._material(cache, mesh, slot, white)
-                    entry[params[2] > 0.0].append((batch, texture, color, params))
+                    material = self._material(cache, mesh, slot, white)
+                    entry[material.alpha_mode != 'OPAQUE'].append((batch, material))
+                    if material.shadow_mode != 'NONE':
+                        entry[2 + (material.shadow_mode != 'OPAQUE')].append(
+                            (batch, material))
                 per_mesh[instance.key] = entry
             items.append(entry)
         return items
 
     def _material(self, cache, mesh, slot, white):
-        """Texture, base colour and packed parameters (shininess, specular, alpha cutoff,
-        has texture) of one material slot; both the shadow and G-buffer passes use them."""
+        """One material slot as both the shadow and G-buffer passes draw it: its uniform
+        block (made once per MaterialInfo and set of loadable textures, kept on it),
+        textures (white where there is none) and settings."""
+        import gpu
         material = mesh.materials[slot] if slot < len(mesh.materials) else None
         if material is None:
-            return white, (0.8, 0.8, 0.8, 1.0), (32.0, 0.5, 0.0, 0.0)
-        texture = cache.texture(material.image) if material.image is not None else None
-        return (texture or white, tuple(material.base_color),
-                (material.shininess, material.specular, material.alpha_cutoff,
-                 1.0 if texture else 0.0))
+            material = _DEFAULT_MATERIAL
+        images = (material.image, material.normal_image, material.emission_image,
+                  material.surface_image)
+        textures = tuple(cache.texture(image) if image is not None else None
+                         for image in images)
+        loaded = tuple(texture is not None for texture in textures)
+        held = material.gpu_block
+        if held is None or held[0] != loaded:
+            shadow_alpha = material.shadow_mode if material.shadow_mode in \
+                ('CLIP', 'HASHED') else 'OPAQUE'
+            block = pack_material({
+                "base_color": material.base_color, "emission": material.emission,
+                "metallic": material.metallic, "roughness": material.roughness,
+                "specular_level": material.specular_level,
+                "normal_strength": material.normal_strength,
+                "alpha_cutoff": material.alpha_cutoff, "alpha_mode": material.alpha_mode,
+                "shadow_alpha_mode": shadow_alpha,
+                "has_base_texture": int(loaded[0]), "has_normal_texture": int(loaded[1]),
+                "has_emission_texture": int(loaded[2]),
+                "surface_convention": material.surface_convention,
+                "roughness_channel": material.roughness_channel if loaded[3] else -1,
+                "metallic_channel": material.metallic_channel if loaded[3] else -1})
+            held = (loaded, gpu.types.GPUUniformBuf(block.tobytes()), shadow_alpha)
+            material.gpu_block = held
+        # What a shadow tile drawn with this material depends on; None when it reads an
+        # image, which may have been edited in place.
+        shadow_key = (held[2], material.base_color[3], material.alpha_cutoff,
+                      material.backface_culling_shadow)
+        if held[2] != 'OPAQUE' and loaded[0]:
+            shadow_key = None
+        return _DrawMaterial(held[1], tuple(t or white for t in textures),
+                             material.alpha_mode, material.shadow_mode,
+                             material.backface_culling, material.backface_culling_shadow,
+                             shadow_key)
 
     def _draw_frozen(self, snap, plan):
         """Draw each frozen cascade's light-space box as coloured lines."""
@@ -556,11 +701,12 @@ class Pipeline:
     # -- read-back for final renders -----------------------------------------------------
     # What each image is read from: (target, colour slot); the G-buffer's normal target is
     # the pipeline's own, the other two the final target's.
-    READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("gbuffer", 1)}
+    READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("gbuffer", 1),
+             "ao": ("ao", 0)}
 
     def render_offscreen(self, snap, cache, reads=None, with_positions=False):
         """Draw into offscreen float targets and read back only what ``reads`` names:
-        image name ("combined", "aux", "normal") -> channels (1..4, from the first;
+        image name ("combined", "aux", "normal", "ao") -> channels (1..4, from the first;
         default: combined and aux, RGBA). Each image is one read into a new buffer that the
         returned (H, W, channels) float32 array views, without another copy. With
         ``with_positions`` the G-buffer's world positions are added as "position" (tests
@@ -590,9 +736,12 @@ class Pipeline:
         out = {}
         for name, channels in reads.items():
             source, slot = self.READS[name]
-            fb = target if source == "final" else self.gbuffer_fb
+            fb = {"final": target, "gbuffer": self.gbuffer_fb, "ao": self.ao_fb}[source]
             if name == "combined":
                 fb, slot = combined_fb or target, 0
+            if fb is None:      # "ao" with AO off: nothing occludes
+                out[name] = np.ones((height, width, channels), dtype=np.float32)
+                continue
             buffer = gpu.types.Buffer('FLOAT', width * height * channels)
             with fb.bind():
                 fb.read_color(0, 0, width, height, channels, slot, 'FLOAT', data=buffer)

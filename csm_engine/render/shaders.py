@@ -21,6 +21,13 @@ import sys
 from ..core import paths
 from ..core.captured_output import CapturedOutput
 from ..core.frame_layout import FRAME_LAYOUT, glsl_defines
+from ..core.material_layout import MATERIAL_LAYOUT
+from ..core.material_layout import glsl_defines as material_defines
+
+# The material block as Blender declares it, for the driver's own compile of a failed
+# program (shader_diagnostics knows of one block, the frame's).
+_MATERIAL_BLOCK = (f"layout(std140) uniform csm_material_block "
+                   f"{{ {MATERIAL_LAYOUT.type_name} material; }};\n")
 
 # --------------------------------------------------------------------------------------
 # Program descriptions
@@ -34,17 +41,19 @@ PROGRAMS = {
         inputs=(("pos", "VEC3"), ("nor", "VEC3"), ("uv", "VEC2")),
         interface=(("world_normal", "VEC3", "smooth"), ("tex_coord", "VEC2", "smooth"),
                    ("view_depth", "FLOAT", "smooth"), ("mirror_sign", "FLOAT", "flat")),
-        push=(("MAT4", "world_from_object"), ("VEC4", "base_color"),
-              ("VEC4", "material_params")),   # shininess, specular, alpha cutoff, has texture
-        samplers=(("FLOAT_2D", "base_color_texture"),),
+        push=(("MAT4", "world_from_object"),),
+        samplers=(("FLOAT_2D", "base_color_texture"), ("FLOAT_2D", "normal_texture"),
+                  ("FLOAT_2D", "emission_texture"), ("FLOAT_2D", "surface_texture")),
         frame=True,
-        outputs=(("VEC4", "out_albedo"), ("VEC4", "out_normal"), ("FLOAT", "out_depth")),
+        material=True,      # MaterialData (core/material_layout.py) as "material"
+        outputs=(("VEC4", "out_albedo"), ("VEC4", "out_normal"), ("FLOAT", "out_depth"),
+                 ("VEC4", "out_emission")),
     ),
     "shadow": dict(
         vertex="shadow_vert.glsl", fragment="shadow_frag.glsl",
         inputs=(("pos", "VEC3"), ("uv", "VEC2")),
         interface=(("tex_coord", "VEC2", "smooth"),),
-        push=(("MAT4", "clip_from_object"), ("VEC4", "material_params")),
+        push=(("MAT4", "clip_from_object"),),
         samplers=(("FLOAT_2D", "base_color_texture"),),
         frame=False,
         outputs=(("VEC4", "out_unused"),),
@@ -55,7 +64,8 @@ PROGRAMS = {
         interface=(("screen_uv", "VEC2", "smooth"),),
         push=(),
         samplers=(("FLOAT_2D", "gbuffer_albedo"), ("FLOAT_2D", "gbuffer_normal"),
-                  ("FLOAT_2D", "gbuffer_depth"), ("FLOAT_2D", "shadow_atlas")),
+                  ("FLOAT_2D", "gbuffer_depth"), ("FLOAT_2D", "shadow_atlas"),
+                  ("FLOAT_2D", "gbuffer_emission")),
         frame=True,
         outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
     ),
@@ -93,7 +103,30 @@ PROGRAMS = {
 # Opaque materials therefore draw with programs that cannot discard; alpha-masked
 # (cut-out) materials use these variants, compiled from the same files with ALPHA_MASK.
 for _name in ("gbuffer", "shadow"):
-    PROGRAMS[_name + "_masked"] = dict(PROGRAMS[_name], defines=(("ALPHA_MASK", "1"),))
+    PROGRAMS[_name + "_masked"] = dict(PROGRAMS[_name], defines=(("ALPHA_MASK", "1"),),
+                                       material=True)
+# Meshes whose materials use a normal map carry a per-corner tangent (xyz, bitangent sign);
+# only they pay for it, with these variants (NORMAL_MAP) of the G-buffer programs.
+for _name in ("gbuffer", "gbuffer_masked"):
+    _spec = PROGRAMS[_name]
+    PROGRAMS[_name + "_tangent"] = dict(
+        _spec, inputs=_spec["inputs"] + (("tan", "VEC4"),),
+        interface=_spec["interface"] + (("world_tangent", "VEC4", "smooth"),),
+        defines=_spec.get("defines", ()) + (("NORMAL_MAP", "1"),))
+
+# Screen-space ambient occlusion (ao_frag.glsl): the horizon search at half resolution,
+# then a depth-aware blur that brings it back to full resolution; lighting multiplies its
+# ambient term by the result.
+_AO_COMMON = dict(vertex="fullscreen_vert.glsl", fragment="ao_frag.glsl",
+                  inputs=(("pos", "VEC2"),), interface=(("screen_uv", "VEC2", "smooth"),),
+                  push=(), frame=True, outputs=(("FLOAT", "out_ao"),))
+PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
+                                            ("FLOAT_2D", "gbuffer_normal")))
+PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
+                                                 ("FLOAT_2D", "gbuffer_normal"),
+                                                 ("FLOAT_2D", "ao_half")),
+                           defines=(("AO_BLUR", "1"),))
+PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),)
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
 
@@ -188,12 +221,18 @@ def _build(program_name, spec, directory):
         info.push_constant(kind, name)
     for slot, (kind, name) in enumerate(spec["samplers"]):
         info.sampler(slot, kind, name)
+    # NOTE: create-info takes one typedef source, so both blocks' structs go in together.
+    typedefs = (FRAME_LAYOUT.glsl() if spec["frame"] else "") + \
+        (MATERIAL_LAYOUT.glsl() if spec.get("material") else "")
+    if typedefs:
+        info.typedef_source(typedefs)
     if spec["frame"]:
-        info.typedef_source(FRAME_LAYOUT.glsl())
         info.uniform_buf(0, FRAME_LAYOUT.type_name, "frame")
+    if spec.get("material"):
+        info.uniform_buf(1, MATERIAL_LAYOUT.type_name, "material")
     for slot, (kind, name) in enumerate(spec["outputs"]):
         info.fragment_out(slot, kind, name)
-    defines = [*glsl_defines(), *spec.get("defines", ())]
+    defines = [*glsl_defines(), *material_defines(), *spec.get("defines", ())]
     for name, value in defines:
         info.define(name, value)
     info.vertex_source(vertex)
@@ -213,7 +252,7 @@ def _build(program_name, spec, directory):
             from . import shader_diagnostics
             driver = shader_diagnostics.driver_log(
                 spec, {"vertex": vertex, "fragment": fragment}, defines,
-                FRAME_LAYOUT.glsl() if spec["frame"] else "",
+                typedefs + (_MATERIAL_BLOCK if spec.get("material") else ""),
                 (FRAME_LAYOUT.type_name, "frame") if spec["frame"] else None)
             located = [e for e in _error_lines(_map_log(driver, file_ids)) if _LOCATION.search(e)]
             errors = located or errors

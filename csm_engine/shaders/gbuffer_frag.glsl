@@ -1,26 +1,94 @@
-/* G-buffer pass, fragment stage.
- * out_albedo = base colour rgb, specular strength
- * out_normal = world normal xyz, Blinn-Phong shininess
- * out_depth  = view depth along the camera's forward axis (0 = background) */
+/* G-buffer pass, fragment stage: one material (MaterialData, core/material_layout.py) per
+ * draw.
+ * out_albedo   = base colour rgb, specular strength
+ * out_normal   = world normal xyz (normal-mapped where the material has a map), shininess
+ * out_depth    = view depth along the camera's forward axis (0 = background)
+ * out_emission = emitted radiance rgb (W/m^2/sr, EEVEE's units), metallic */
+
+/* A stable per-pixel threshold in 0..1 for hashed alpha: the 8x8 ordered-dither (Bayer)
+ * rank of the pixel, so alpha a keeps a of every 8x8 block of pixels (in 1/64 steps),
+ * evenly spread, and it does not crawl while nothing moves. Must match alpha_hash in
+ * shadow_frag.glsl. */
+float alpha_hash(vec2 pixel)
+{
+  ivec2 p = ivec2(floor(pixel)) & 7;
+  int x = p.x;
+  int xy = p.x ^ p.y;
+  int rank = ((xy & 1) << 5) | ((x & 1) << 4) | ((xy & 2) << 2) | ((x & 2) << 1) |
+             ((xy & 4) >> 1) | ((x & 4) >> 2);
+  return (float(rank) + 0.5) / 64.0;
+}
+
+/* Roughness -> Blinn-Phong exponent (Beckmann-style 2/r^4 - 2), clamped to 1..4096. */
+float roughness_shininess(float roughness)
+{
+  float r = clamp(roughness, 0.02, 1.0);
+  return clamp(2.0 / (r * r * r * r) - 2.0, 1.0, 4096.0);
+}
+
 void main()
 {
-  vec4 base = base_color;
-  if (material_params.w > 0.5) {
+  vec4 base = material.base_color;
+  if (material.has_base_texture != 0) {
     base *= texture(base_color_texture, tex_coord);
   }
 #ifdef ALPHA_MASK
-  /* Alpha-masked (cutout) materials, e.g. Sponza's foliage. Only this variant may discard:
-   * see shaders.py on early depth tests. */
-  if (base.a < material_params.z) {
+  /* Only this variant may discard: see shaders.py on early depth tests. CLIP cuts out below
+   * the cutoff (Sponza's foliage); HASHED keeps a pixel when alpha beats the hash. */
+  if (material.alpha_mode == ALPHA_HASHED ? base.a <= alpha_hash(gl_FragCoord.xy)
+                                          : base.a < material.alpha_cutoff) {
     discard;
   }
 #endif
-  vec3 n = normalize(world_normal);
   /* Blender draws faces from both sides; light the side the camera sees. */
-  if (gl_FrontFacing != (mirror_sign > 0.0)) {
-    n = -n;
+  float facing = (gl_FrontFacing != (mirror_sign > 0.0)) ? -1.0 : 1.0;
+  vec3 n = normalize(world_normal) * facing;
+#ifdef NORMAL_MAP
+  if (material.has_normal_texture != 0 && dot(world_tangent.xyz, world_tangent.xyz) > 0.0) {
+    /* Blender's Normal Map node (tangent space): T, B = sign * cross(N, T), the map's
+     * xyz along T, B, N, then mixed with N by Strength. The side flip of N flips T too;
+     * the bitangent keeps its direction (and turns with a mirrored object's winding). */
+    vec3 t = world_tangent.xyz * facing;
+    vec3 b = world_tangent.w * mirror_sign * cross(n, world_tangent.xyz);
+    vec3 mapped = texture(normal_texture, tex_coord).rgb * 2.0 - 1.0;
+    vec3 bumped = normalize(mapped.x * t + mapped.y * b + mapped.z * n);
+    n = normalize(mix(n, bumped, max(material.normal_strength, 0.0)));
   }
-  out_albedo = vec4(base.rgb, material_params.y);
-  out_normal = vec4(n, material_params.x);
+#endif
+  float metallic = material.metallic;
+  float roughness = material.roughness;
+  float level = material.specular_level;
+  float shininess;
+  float specular;
+  bool has_surface = material.roughness_channel >= 0 || material.metallic_channel >= 0;
+  vec4 surface = has_surface ? texture(surface_texture, tex_coord) : vec4(0.0);
+  if (has_surface && material.surface_convention == SURFACE_COURSE) {
+    /* The course's files: shininess / 256 in green (0.01 where green is 0), specular
+     * level in blue; no metal (docs/materials.md). */
+    float green = surface[material.roughness_channel];
+    shininess = green > 0.0 ? 256.0 * green : 0.01;
+    specular = surface[material.metallic_channel];
+    metallic = 0.0;
+  }
+  else {
+    if (material.roughness_channel >= 0) {
+      roughness = surface[material.roughness_channel];
+    }
+    if (material.metallic_channel >= 0) {
+      metallic = surface[material.metallic_channel];
+    }
+    shininess = roughness_shininess(roughness);
+    /* A fully rough surface has no visible highlight; without this, roughness 1 (glTF's
+     * default) gives exponent 1 and washes everything white. */
+    float smooth_part = 1.0 - clamp(roughness, 0.0, 1.0);
+    specular = level * smooth_part * smooth_part;
+  }
+  vec3 emission = material.emission;
+  if (material.has_emission_texture != 0) {
+    emission *= texture(emission_texture, tex_coord).rgb;
+  }
+  out_albedo = vec4(base.rgb, specular);
+  out_normal = vec4(n, shininess);
   out_depth = max(view_depth, 1e-6);
+  out_emission = vec4(emission, clamp(metallic, 0.0, 1.0));
 }

@@ -1,4 +1,4 @@
-/* G-buffer pass, vertex stage: world normal, UV and view depth for each corner. */
+/* G-buffer pass, vertex stage: world normal (and tangent), UV and view depth per corner. */
 void main()
 {
   vec4 world = world_from_object * vec4(pos, 1.0);
@@ -8,6 +8,11 @@ void main()
   /* A mirrored object (negative scale) turns its triangles' winding around, so
    * gl_FrontFacing says "back" for the faces the camera sees; the fragment stage undoes it. */
   mirror_sign = determinant(mat3(world_from_object)) < 0.0 ? -1.0 : 1.0;
+#ifdef NORMAL_MAP
+  /* A tangent lies in the surface like an edge does, so it moves with the matrix itself
+   * (not its inverse transpose); w is the bitangent's sign (MikkTSpace). */
+  world_tangent = vec4(mat3(world_from_object) * tan.xyz, tan.w);
+#endif
   tex_coord = uv;
   /* Linear in the world position, so interpolation gives the exact per-pixel value; the
    * lighting pass rebuilds the world position from it (4 bytes a pixel instead of 16). */

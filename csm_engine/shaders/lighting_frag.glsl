@@ -46,6 +46,7 @@ void main()
   vec4 albedo_spec = texelFetch(gbuffer_albedo, px, 0);
   vec4 normal_shine = texelFetch(gbuffer_normal, px, 0);
   float depth = texelFetch(gbuffer_depth, px, 0).r;
+  vec4 emission_metallic = texelFetch(gbuffer_emission, px, 0);
   int debug_view = frame.debug_view;
   bool inset = frame.debug_inset != 0;
   int shadow_tile_count = frame.cascade_count + frame.spot_light_count;
@@ -77,12 +78,17 @@ void main()
   vec3 albedo = albedo_spec.rgb;
   float specular = albedo_spec.a;
   float shininess = normal_shine.w;
+  float metallic = emission_metallic.a;
   vec3 to_camera = frame.is_perspective != 0 ? normalize(frame.camera_position - p) :
                                                -frame.camera_forward;
   float view_depth = depth;
 
   /* A uniform World of radiance L: irradiance pi * L times the Lambert BRDF albedo / pi. */
   vec3 color = frame.ambient_color * albedo;
+  /* Ambient occlusion darkens only this term, as in EEVEE: direct light has its shadows. */
+  float ambient_visibility = frame.ao_enabled != 0 ?
+      mix(1.0, texelFetch(ambient_occlusion, px, 0).r, frame.ao_strength) : 1.0;
+  color *= ambient_visibility;
 
   float sun_vis = 1.0;
   float cascade = -1.0;
@@ -101,8 +107,8 @@ void main()
         cascade = float(c);
       }
     }
-    color += frame.sun_color * blinn_phong(albedo, specular, shininess, n, l, to_camera) *
-             sun_vis;
+    color += frame.sun_color *
+             surface_brdf(albedo, metallic, specular, shininess, n, l, to_camera) * sun_vis;
   }
 
   int point_count = frame.point_light_count;
@@ -115,8 +121,8 @@ void main()
     float d = length(to_light);
     float attenuation = distance_falloff(light.falloff, d, light.radius);
     if (attenuation > 0.0) {
-      color += light.color * attenuation *
-               blinn_phong(albedo, specular, shininess, n, to_light / max(d, 1e-6), to_camera);
+      color += light.color * attenuation * surface_brdf(albedo, metallic, specular, shininess,
+                                                        n, to_light / max(d, 1e-6), to_camera);
     }
   }
 
@@ -137,9 +143,13 @@ void main()
         vis = shadow_tile_visibility(spot.shadow_tile, p, n, dot(n, l), spot.source_radius);
       }
       color += spot.color * attenuation * vis *
-               blinn_phong(albedo, specular, shininess, n, l, to_camera);
+               surface_brdf(albedo, metallic, specular, shininess, n, l, to_camera);
     }
   }
+
+  /* Emission (EEVEE's units: radiance added as is): shows in full shadow and without any
+   * light, and no light or ambient term scales it. */
+  color += emission_metallic.rgb;
 
   if (debug_view == DEBUG_CASCADES) {
     /* Hue from the cascade, brightness from the lit image: readable on any albedo (a plain
@@ -176,8 +186,11 @@ void main()
   else if (debug_view == DEBUG_DEPTH) {
     color = vec3(clamp(view_depth / max(frame.shadow_distance, 1e-6), 0.0, 1.0));
   }
+  else if (debug_view == DEBUG_AMBIENT_OCCLUSION) {
+    color = vec3(ambient_visibility);
+  }
   else if (debug_view == DEBUG_SPECULAR) {
-    color = vec3(specular, shininess / 256.0, 0.0);
+    color = vec3(specular, shininess / 256.0, metallic);
   }
 
   out_color = vec4(color, 1.0);

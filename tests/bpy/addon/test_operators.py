@@ -331,7 +331,8 @@ class _Layout:
 
 def test_light_and_scene_groups_are_in_both_panels(empty_scene):
     keys = [key for key, _label, _draw in ui.GROUPS]
-    assert keys == ["cascades", "filtering", "bias", "occluders", "light", "debug", "scene"]
+    assert keys == ["cascades", "filtering", "bias", "occluders", "light", "antialiasing",
+                    "debug", "scene"]
     for key in ("light", "scene"):
         for space in ("properties", "view_3d"):
             assert hasattr(bpy.types, f"CSM_PT_{space}_{key}"), (space, key)
