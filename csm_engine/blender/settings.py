@@ -136,6 +136,12 @@ class CSMSettings(bpy.types.PropertyGroup):
         update=_redraw,
         description="View depth (scene units) up to which the sun casts shadows. "
                     "0 uses the camera's far clip")
+    fit_to_visible: BoolProperty(
+        name="Fit to Visible Depth", default=False, update=_redraw,
+        description="Sample-distribution shadow maps: the splits divide the nearest to "
+                    "farthest depth the camera actually sees (measured on the GPU each frame) "
+                    "instead of clip start to shadow distance, so no cascade is spent on "
+                    "empty depth. Sharper shadows wherever the view starts far away")
     resolution: IntProperty(
         name="Resolution", default=2048, min=64, max=8192, subtype='PIXEL', update=_redraw,
         description="Shadow-map size of the first cascade in texels; "

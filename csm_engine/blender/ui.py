@@ -19,6 +19,7 @@ def draw_cascades(layout, csm):
         row = col.row(align=True)
         for i in range(max(csm.cascade_count - 1, 0)):
             row.prop(csm, "manual_splits", index=i, text=f"Split {i + 1}")
+    col.prop(csm, "fit_to_visible")
     col.prop(csm, "shadow_distance")
     col.prop(csm, "resolution")
     col.prop(csm, "equal_resolution")

@@ -644,7 +644,7 @@ class CascadeSet:
 def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HYBRID",
                      lam=0.5, manual=None, shadow_distance=None, base_resolution=2048,
                      equal_resolution=False, stabilize=True, occluder_margin=None,
-                     scene_bounds=None, up_hint=None, blend_band=0.0):
+                     scene_bounds=None, up_hint=None, blend_band=0.0, depth_range=None):
     """Splits and shadow boxes for one camera and one sun.
 
     - ``projection``: ``CameraProjection`` or an OpenGL ``clip_from_view`` matrix.
@@ -657,6 +657,11 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
     - ``occluder_margin``: scene units; ``None`` means ``default_occluder_margin(scene_bounds)``.
     - ``blend_band``: scene units (see ``blend_band_widths``). Cascade ``i+1`` is fitted from
       ``splits[i+1] - band`` on, because the shader samples it inside that band too.
+
+    - ``depth_range``: (nearest, farthest) view depth of what the camera actually sees
+      (sample-distribution shadow maps, see ``visible_depth_range``): the splits then
+      divide that range instead of clip start .. shadow distance, so no cascade is spent
+      on empty depth. Clamped to the clip start .. shadow distance.
 
     An orthographic view whose clip start is not above 0 (Blender's orthographic viewport
     clips from behind the eye) cannot use logarithmic splits; it falls back to uniform
@@ -681,7 +686,21 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
         notes.append(f"{scheme.lower()} splits need a clip start above 0; this orthographic "
                      f"view clips from {near}, so uniform splits are used")
         scheme = "UNIFORM"
-    splits = split_distances(near, far, count, scheme, lam=lam, manual=manual)
+    first, last = near, far
+    if depth_range is not None:
+        low, high = (finite("depth range", v) for v in depth_range)
+        first = min(max(low, near), far)
+        last = min(max(high, first), far)
+        if not last > first:
+            last = min(far, first + max(1e-3 * first, 1e-6))
+        if scheme == "MANUAL" and manual is not None:
+            # Manual splits are distances the user typed: keep those inside the range.
+            manual = [d for d in manual if first < d < last]
+            if len(manual) != count - 1:
+                scheme = "HYBRID"
+                notes.append("manual splits fall outside the visible depth range; "
+                             "hybrid splits are used")
+    splits = split_distances(first, last, count, scheme, lam=lam, manual=manual)
     resolutions = cascade_resolutions(len(splits) - 1, base_resolution, equal_resolution)
     rotation = light_view_matrix(light_dir, up_hint)
     if occluder_margin is None:
@@ -711,6 +730,30 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
 # --------------------------------------------------------------------------------------
 # Caster culling
 # --------------------------------------------------------------------------------------
+
+def visible_depth_range(nearest, farthest, previous=None, steps_per_octave=8,
+                        shrink_below=0.75):
+    """The depth range sample-distribution shadow maps fit the cascades to, from the
+    nearest and farthest view depth the G-buffer holds.
+
+    NOTE: quantized outwards to a geometric grid (``steps_per_octave`` per doubling), and
+    the ``previous`` range is kept while it still holds the new one and the new one's
+    logarithmic span is not below ``shrink_below`` of it: small camera moves then leave the
+    cascades exactly where they were (stabilized edges stay still, no re-rendered tiles),
+    and a range that only grows or shrinks a little does not pop. Returns (near, far) or
+    None when nothing is visible."""
+    if not (np.isfinite(nearest) and np.isfinite(farthest)) or not 0.0 < nearest <= farthest:
+        return None
+    step = math.log(2.0) / steps_per_octave
+    low = math.exp(math.floor(math.log(nearest) / step) * step)
+    high = math.exp(math.ceil(math.log(farthest) / step + 1e-9) * step)
+    if previous is not None:
+        old_low, old_high = previous
+        if old_low <= low and old_high >= high and \
+                math.log(high / low) >= shrink_below * math.log(old_high / old_low):
+            return previous
+    return (low, high)
+
 
 def aabbs_in_cascade(aabb_min_world, aabb_max_world, cascade):
     """Which of N world AABBs may cast into the cascade: (N, 3), (N, 3) -> (N,) bool.

@@ -69,8 +69,16 @@ def instance_bounds(instances, meshes):
     return world.min(axis=1), world.max(axis=1)
 
 
-def plan_shadows(snap, bounds):
-    """Cascade splits and light matrices for this frame (pure math, see cascades.py)."""
+# Scene name -> the depth range the cascades were last fitted to (Fit to Visible Depth);
+# kept so that the next frame can hold it (cascades.visible_depth_range's hysteresis).
+_DEPTH_RANGES = {}
+
+
+def plan_shadows(snap, bounds, visible_depth=None):
+    """Cascade splits and light matrices for this frame (pure math, see cascades.py).
+    ``visible_depth``: (nearest, farthest) view depth in the G-buffer, measured when the
+    Fit to Visible Depth setting is on (sample-distribution shadow maps); None: the
+    cascades divide clip start .. shadow distance."""
     s = snap.settings
     camera = snap.camera
     tiles = []
@@ -98,6 +106,12 @@ def plan_shadows(snap, bounds):
                 # Auto: the near plane reaches the scene's bounds, so no caster is clipped.
                 # Manual: exactly the margin the user typed, nothing added.
                 scene_bounds=bounds if s.occluder_margin_auto else None)
+            if visible_depth is not None and getattr(s, "fit_to_visible", False):
+                fitted = cascades.visible_depth_range(
+                    *visible_depth, previous=_DEPTH_RANGES.get(snap.scene_name))
+                if fitted is not None:
+                    _DEPTH_RANGES[snap.scene_name] = fitted
+                    arguments["depth_range"] = fitted
             try:
                 result = cascades.compute_cascades(
                     camera.world_from_view, camera.projection, -snap.sun.to_light,

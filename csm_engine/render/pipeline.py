@@ -219,10 +219,14 @@ class Pipeline:
         bounds_lo_hi = instance_bounds(snap.instances, cache.meshes)
         bounds = None if bounds_lo_hi is None else \
             (bounds_lo_hi[0].min(axis=0), bounds_lo_hi[1].max(axis=0))
+        # Fit to Visible Depth needs the G-buffer's depths before it can plan; the frame
+        # block it draws the G-buffer with needs a plan: the plain one (the G-buffer reads
+        # only the camera from it).
+        fit_to_visible = plan is None and bool(getattr(snap.settings, "fit_to_visible", False))
         if plan is None:
             plan = plan_shadows(snap, bounds)
         self.warnings.extend(w for w in snap.warnings + plan.warnings if w not in self.warnings)
-        atlas = self._atlas(plan)
+        atlas = None if fit_to_visible else self._atlas(plan)
         frame_data = pack_frame(snap, plan)
         frame_ubo = self._frame_ubo(frame_data)
         self.timings["python_setup"] = time.perf_counter() - start
@@ -238,110 +242,132 @@ class Pipeline:
         # instance culls its front-wound faces.
         mirrored = np.linalg.det(world_from_objects[:, :3, :3]) < 0.0
 
-        # 1. Shadow atlas: only tiles whose contents would change are cleared and drawn.
-        t = time.perf_counter()
-        atlas_fb = self._framebuffer("atlas", depth=atlas)
-        held = self._atlas_contents(atlas)
-        # Blender 3.4's gpu.state has no scissor: there the whole atlas is cleared and drawn.
-        can_clear_tile = hasattr(gpu.state, "scissor_set")
-        signatures = self._caster_signatures(snap, cache, items)
-        cull_front = bool(snap.settings.cull_front_faces)
-        stale = []
-        casts_shadow = np.array([i.casts_shadow for i in snap.instances], dtype=bool)
-        for tile in plan.tiles:
-            visible = np.asarray(self._cull(snap.instances, bounds_lo_hi, tile), dtype=np.int64)
-            visible = visible[casts_shadow[visible]]
-            clip_from_world = np.asarray(tile.clip_from_world, dtype=np.float64)
-            signature = (tuple(tile.origin), tile.resolution, cull_front,
-                         clip_from_world, world_from_objects[visible].tobytes(),
-                         tuple(signatures[i] for i in visible))
-            key = (tuple(tile.origin), tile.resolution)
-            if can_clear_tile and None not in signature[5] and \
-                    _same_tile(held.get(key), signature):
-                continue
-            stale.append((tile, visible, key, signature))
-        if not self.skip_gpu_calls:
-            SHADOW_TILES["skipped"] += len(plan.tiles) - len(stale)
-            SHADOW_TILES["drawn"] += len(stale)
-        self.shadow_tiles = {"drawn": len(stale), "skipped": len(plan.tiles) - len(stale)}
-        with atlas_fb.bind():
-            if not can_clear_tile:
-                self._gpu_call(atlas_fb.clear, depth=1.0)
-            gpu.state.depth_test_set('LESS_EQUAL')
-            gpu.state.depth_mask_set(True)
-            gpu.state.face_culling_set('FRONT' if cull_front else 'NONE')
-            for tile, visible, key, signature in stale:
-                gpu.state.viewport_set(tile.origin[0], tile.origin[1],
-                                       tile.resolution, tile.resolution)
-                # NOTE: a clear honours the scissor box, not the viewport: without it the
-                # whole atlas (the other tiles too) would be cleared.
-                if can_clear_tile:
-                    gpu.state.scissor_test_set(True)
-                    gpu.state.scissor_set(tile.origin[0], tile.origin[1],
-                                          tile.resolution, tile.resolution)
+        def shadow_pass(t):
+            """1. Shadow atlas: only tiles whose contents would change are cleared and
+            drawn."""
+            t = time.perf_counter()
+            atlas_fb = self._framebuffer("atlas", depth=atlas)
+            held = self._atlas_contents(atlas)
+            # Blender 3.4's gpu.state has no scissor: there the whole atlas is cleared and drawn.
+            can_clear_tile = hasattr(gpu.state, "scissor_set")
+            signatures = self._caster_signatures(snap, cache, items)
+            cull_front = bool(snap.settings.cull_front_faces)
+            stale = []
+            casts_shadow = np.array([i.casts_shadow for i in snap.instances], dtype=bool)
+            for tile in plan.tiles:
+                visible = np.asarray(self._cull(snap.instances, bounds_lo_hi, tile), dtype=np.int64)
+                visible = visible[casts_shadow[visible]]
+                clip_from_world = np.asarray(tile.clip_from_world, dtype=np.float64)
+                signature = (tuple(tile.origin), tile.resolution, cull_front,
+                             clip_from_world, world_from_objects[visible].tobytes(),
+                             tuple(signatures[i] for i in visible))
+                key = (tuple(tile.origin), tile.resolution)
+                if can_clear_tile and None not in signature[5] and \
+                        _same_tile(held.get(key), signature):
+                    continue
+                stale.append((tile, visible, key, signature))
+            if not self.skip_gpu_calls:
+                SHADOW_TILES["skipped"] += len(plan.tiles) - len(stale)
+                SHADOW_TILES["drawn"] += len(stale)
+            self.shadow_tiles = {"drawn": len(stale), "skipped": len(plan.tiles) - len(stale)}
+            with atlas_fb.bind():
+                if not can_clear_tile:
                     self._gpu_call(atlas_fb.clear, depth=1.0)
-                    gpu.state.scissor_test_set(False)
-                if not self.skip_gpu_calls:
-                    # Forget the tile's contents while it is redrawn: if drawing raises,
-                    # the next frame draws it again.
-                    held.pop(key, None)
-                if len(visible):
-                    self._draw_casters(library, items, world_from_objects, tile, visible,
-                                       mirrored, cull_front)
-                if not self.skip_gpu_calls:
-                    held[key] = signature
-            gpu.state.face_culling_set('NONE')
-        t = self._sync(atlas_fb, "shadow", t)
+                gpu.state.depth_test_set('LESS_EQUAL')
+                gpu.state.depth_mask_set(True)
+                gpu.state.face_culling_set('FRONT' if cull_front else 'NONE')
+                for tile, visible, key, signature in stale:
+                    gpu.state.viewport_set(tile.origin[0], tile.origin[1],
+                                           tile.resolution, tile.resolution)
+                    # NOTE: a clear honours the scissor box, not the viewport: without it the
+                    # whole atlas (the other tiles too) would be cleared.
+                    if can_clear_tile:
+                        gpu.state.scissor_test_set(True)
+                        gpu.state.scissor_set(tile.origin[0], tile.origin[1],
+                                              tile.resolution, tile.resolution)
+                        self._gpu_call(atlas_fb.clear, depth=1.0)
+                        gpu.state.scissor_test_set(False)
+                    if not self.skip_gpu_calls:
+                        # Forget the tile's contents while it is redrawn: if drawing raises,
+                        # the next frame draws it again.
+                        held.pop(key, None)
+                    if len(visible):
+                        self._draw_casters(library, items, world_from_objects, tile, visible,
+                                           mirrored, cull_front)
+                    if not self.skip_gpu_calls:
+                        held[key] = signature
+                gpu.state.face_culling_set('NONE')
+            t = self._sync(atlas_fb, "shadow", t)
+            return t
 
-        # 2. G-buffer
-        albedo = self._texture("albedo", (width, height), 'RGBA16F')
-        normal = self._texture("normal", (width, height), 'RGBA16F')
-        view_depth = self._texture("view_depth", (width, height), 'R32F')
-        depth = self._texture("depth", (width, height), 'DEPTH_COMPONENT32F')
-        emission = self._texture("emission", (width, height), 'RGBA16F')
-        gbuffer_fb = self._framebuffer("gbuffer", depth=depth,
-                                       colors=(albedo, normal, view_depth, emission))
-        # Near to far, so the early depth test skips the shading of hidden fragments.
-        order = np.asarray(front_to_back(snap, bounds_lo_hi), dtype=np.int64)
-        order = order[np.array([i.visible_camera for i in snap.instances], dtype=bool)[order]]
-        with gbuffer_fb.bind():
-            gpu.state.viewport_set(0, 0, width, height)
-            self._gpu_call(gbuffer_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-            gpu.state.depth_test_set('LESS_EQUAL')
-            gpu.state.depth_mask_set(True)
-            culling = 'NONE'
-            # Opaque before alpha-tested; meshes with tangents (normal maps) use the
-            # programs that read them.
-            for masked, tangents in ((False, False), (False, True), (True, False),
-                                     (True, True)):
-                gbuffer = None
-                for index in order:
-                    entry = items[index]
-                    draws = entry[masked]
-                    if not draws or entry[4] != tangents:
-                        continue
-                    if gbuffer is None:
-                        gbuffer = library.get("gbuffer" + ("_masked" if masked else "") +
-                                              ("_tangent" if tangents else ""))
-                        gbuffer.bind()
-                        gbuffer.uniform_block("frame", frame_ubo)
-                        bound = None
-                    gbuffer.uniform_float("world_from_object", world_from_objects_gl[index])
-                    for batch, material in draws:
-                        wanted = ('FRONT' if mirrored[index] else 'BACK') \
-                            if material.backface_culling else 'NONE'
-                        if wanted != culling:
-                            gpu.state.face_culling_set(wanted)
-                            culling = wanted
-                        if material is not bound:
-                            gbuffer.uniform_block("material", material.block)
-                            for name, texture in zip(_MATERIAL_SAMPLERS, material.textures):
-                                gbuffer.uniform_sampler(name, texture)
-                            bound = material
-                        self._gpu_call(batch.draw, gbuffer)
-            gpu.state.face_culling_set('NONE')
-            gpu.state.depth_test_set('NONE')
-        t = self._sync(gbuffer_fb, "gbuffer", t)
+        def gbuffer_pass(t):
+            """2. G-buffer."""
+            albedo = self._texture("albedo", (width, height), 'RGBA16F')
+            normal = self._texture("normal", (width, height), 'RGBA16F')
+            view_depth = self._texture("view_depth", (width, height), 'R32F')
+            depth = self._texture("depth", (width, height), 'DEPTH_COMPONENT32F')
+            emission = self._texture("emission", (width, height), 'RGBA16F')
+            gbuffer_fb = self._framebuffer("gbuffer", depth=depth,
+                                           colors=(albedo, normal, view_depth, emission))
+            # Near to far, so the early depth test skips the shading of hidden fragments.
+            order = np.asarray(front_to_back(snap, bounds_lo_hi), dtype=np.int64)
+            order = order[np.array([i.visible_camera for i in snap.instances], dtype=bool)[order]]
+            with gbuffer_fb.bind():
+                gpu.state.viewport_set(0, 0, width, height)
+                self._gpu_call(gbuffer_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+                gpu.state.depth_test_set('LESS_EQUAL')
+                gpu.state.depth_mask_set(True)
+                culling = 'NONE'
+                # Opaque before alpha-tested; meshes with tangents (normal maps) use the
+                # programs that read them.
+                for masked, tangents in ((False, False), (False, True), (True, False),
+                                         (True, True)):
+                    gbuffer = None
+                    for index in order:
+                        entry = items[index]
+                        draws = entry[masked]
+                        if not draws or entry[4] != tangents:
+                            continue
+                        if gbuffer is None:
+                            gbuffer = library.get("gbuffer" + ("_masked" if masked else "") +
+                                                  ("_tangent" if tangents else ""))
+                            gbuffer.bind()
+                            gbuffer.uniform_block("frame", frame_ubo)
+                            bound = None
+                        gbuffer.uniform_float("world_from_object", world_from_objects_gl[index])
+                        for batch, material in draws:
+                            wanted = ('FRONT' if mirrored[index] else 'BACK') \
+                                if material.backface_culling else 'NONE'
+                            if wanted != culling:
+                                gpu.state.face_culling_set(wanted)
+                                culling = wanted
+                            if material is not bound:
+                                gbuffer.uniform_block("material", material.block)
+                                for name, texture in zip(_MATERIAL_SAMPLERS, material.textures):
+                                    gbuffer.uniform_sampler(name, texture)
+                                bound = material
+                            self._gpu_call(batch.draw, gbuffer)
+                gpu.state.face_culling_set('NONE')
+                gpu.state.depth_test_set('NONE')
+            t = self._sync(gbuffer_fb, "gbuffer", t)
+            return t, (albedo, normal, view_depth, emission, gbuffer_fb)
+
+        t = time.perf_counter()
+        if fit_to_visible:
+            # Sample-distribution shadow maps: the G-buffer first, its nearest and farthest
+            # view depth, then cascades fitted to that range, then their shadow maps.
+            t, gbuffer = gbuffer_pass(t)
+            visible = self._visible_depth_range(gbuffer[2], width, height)
+            t = self._sync(gbuffer[4], "depth_range", t)
+            plan = plan_shadows(snap, bounds, visible)
+            self.warnings.extend(w for w in plan.warnings if w not in self.warnings)
+            atlas = self._atlas(plan)
+            frame_ubo = self._frame_ubo(pack_frame(snap, plan))
+            t = shadow_pass(t)
+        else:
+            t = shadow_pass(t)
+            t, gbuffer = gbuffer_pass(t)
+        albedo, normal, view_depth, emission, gbuffer_fb = gbuffer
 
         # 2b. Ambient occlusion: skipped, with no texture allocated, when it is off.
         ambient_occlusion = self._ambient_occlusion(snap, frame_ubo, view_depth, normal,
@@ -580,6 +606,40 @@ class Pipeline:
         shader.bind()
         shader.uniform_float("clip_from_world", _column_major(snap.camera.clip_from_world))
         batch.draw(shader)
+
+    # -- sample-distribution shadow maps ------------------------------------------------
+    def _visible_depth_range(self, view_depth, width, height):
+        """(nearest, farthest) view depth in the G-buffer, or None when it shows nothing:
+        4x4 min/max reductions on the GPU down to one pixel, then one pixel read back."""
+        import gpu
+        source, is_view_depth = view_depth, 1
+        size = (width, height)
+        level = 0
+        while True:
+            size = (max((size[0] + 3) // 4, 1), max((size[1] + 3) // 4, 1))
+            target = self._texture(f"depth_range_{level}", size, 'RGBA32F')
+            fb = self._framebuffer(f"depth_range_{level}", colors=(target,))
+            shader = shaders.LIBRARY.get("depth_range")
+            with fb.bind():
+                gpu.state.viewport_set(0, 0, size[0], size[1])
+                gpu.state.depth_test_set('NONE')
+                gpu.state.blend_set('NONE')
+                shader.bind()
+                shader.uniform_int("source_is_view_depth", is_view_depth)
+                shader.uniform_sampler("source", source)
+                self._gpu_call(self._fullscreen_batch().draw, shader)
+                if size == (1, 1):
+                    if self.skip_gpu_calls:
+                        return None
+                    pixel = gpu.types.Buffer('FLOAT', 4)
+                    fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT', data=pixel)
+                    nearest, farthest = float(pixel[0]), float(pixel[1])
+                    break
+            source, is_view_depth = target, 0
+            level += 1
+        if not 0.0 < nearest <= farthest < 1e37:
+            return None
+        return nearest, farthest
 
     # -- anti-aliasing -------------------------------------------------------------------
     def _fullscreen_pass(self, program, target_fb, width, height, samplers, floats=()):

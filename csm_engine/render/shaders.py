@@ -78,6 +78,15 @@ PROGRAMS = {
         frame=False,
         outputs=(("VEC4", "out_color"),),
     ),
+    "depth_range": dict(
+        vertex="fullscreen_vert.glsl", fragment="depth_range_frag.glsl",
+        inputs=(("pos", "VEC2"),),
+        interface=(("screen_uv", "VEC2", "smooth"),),
+        push=(("INT", "source_is_view_depth"),),
+        samplers=(("FLOAT_2D", "source"),),
+        frame=False,
+        outputs=(("VEC4", "out_color"),),
+    ),
     "accumulate": dict(
         vertex="fullscreen_vert.glsl", fragment="accumulate_frag.glsl",
         inputs=(("pos", "VEC2"),),
