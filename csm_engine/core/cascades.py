@@ -523,7 +523,8 @@ def default_occluder_margin(scene_bounds):
 
 
 def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize=True,
-                occluder_margin=0.0, scene_bounds=None, bounding_sphere_world=None):
+                occluder_margin=0.0, scene_bounds=None, bounding_sphere_world=None,
+                receiver_box=None):
     """Fit one cascade's orthographic shadow box to a frustum slice.
 
     - ``slice_corners_world``: (8, 3) world corners (``frustum_slice_corners``).
@@ -540,6 +541,11 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
     - ``bounding_sphere_world``: optional precomputed ``(centre, radius)``;
       ``compute_cascades`` computes it in view space, where it is exactly the same for
       every camera orientation.
+    - ``receiver_box``: optional ``(centre_xy, half_width)`` in the rotated light frame:
+      the square the visible receivers of this slice need (``receiver_square``), used
+      instead of the sphere when it is smaller (sample-distribution shadow maps). Its half
+      width is already quantized, so with ``stabilize`` the texel size still only changes
+      in coarse steps, and the centre is snapped to texels as the sphere's is.
 
     The far plane is the slice's far side: receivers only exist inside the slice.
     """
@@ -563,13 +569,24 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
             centre_world = vector3("bounding sphere centre", bounding_sphere_world[0])
             radius = finite("bounding sphere radius", bounding_sphere_world[1])
         radius = round_up_radius(max(radius, 1e-9))
+        depth_radius = radius
+        radius_xy = np.array([radius, radius])
+        if receiver_box is not None and np.any(np.asarray(receiver_box[1]) < radius):
+            # The receivers' rectangle: its centre, and its half widths as per-axis "radii"
+            # (the depth range below still comes from the sphere, which holds every
+            # receiver of the slice).
+            centre_rot_xy = np.asarray(receiver_box[0], dtype=np.float64)
+            centre_world = rotation.T @ np.array([centre_rot_xy[0], centre_rot_xy[1],
+                                                  (rotation @ centre_world)[2]])
+            radius_xy = np.minimum(np.asarray(receiver_box[1], dtype=np.float64), radius)
         # NOTE: one texel of slack: the snapped centre may sit up to half a texel from the
         # sphere's centre on each axis, so the box is at least 2r + 1 texel wide and the
         # sphere always fits. The texel size is then rounded up to 9 significant bits, so
         # it is exactly representable and whole multiples of it (the snapped centres) are
         # exact too. It depends only on the rounded radius and the resolution, so it is
         # constant while the camera turns.
-        texel = _round_up_dyadic(2.0 * radius / (resolution - 1), bits=9)
+        texel = np.array([_round_up_dyadic(2.0 * r / (resolution - 1), bits=9)
+                          for r in radius_xy])
         half = 0.5 * resolution * texel
         centre_rot = rotation @ centre_world
         # NOTE: snap the box centre to whole texels of a grid fixed in light space (anchored
@@ -578,9 +595,9 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
         # shadow edges do not crawl ("shimmer").
         centre_xy = snap_to_texel_grid(centre_rot[:2], texel)
         low_xy, high_xy = centre_xy - half, centre_xy + half
-        nearest_depth = -centre_rot[2] - radius          # along the light, slice side
-        farthest_depth = -centre_rot[2] + radius
-        texel_xy = np.array([texel, texel])
+        nearest_depth = -centre_rot[2] - depth_radius    # along the light, slice side
+        farthest_depth = -centre_rot[2] + depth_radius
+        texel_xy = texel
         sphere_centre = centre_world
     else:
         low_xy, high_xy = corners_rot[:, :2].min(axis=0), corners_rot[:, :2].max(axis=0)
@@ -644,7 +661,8 @@ class CascadeSet:
 def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HYBRID",
                      lam=0.5, manual=None, shadow_distance=None, base_resolution=2048,
                      equal_resolution=False, stabilize=True, occluder_margin=None,
-                     scene_bounds=None, up_hint=None, blend_band=0.0, depth_range=None):
+                     scene_bounds=None, up_hint=None, blend_band=0.0, depth_range=None,
+                     depth_blocks=None, previous_squares=None):
     """Splits and shadow boxes for one camera and one sun.
 
     - ``projection``: ``CameraProjection`` or an OpenGL ``clip_from_view`` matrix.
@@ -662,6 +680,10 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
       (sample-distribution shadow maps, see ``visible_depth_range``): the splits then
       divide that range instead of clip start .. shadow distance, so no cascade is spent
       on empty depth. Clamped to the clip start .. shadow distance.
+    - ``depth_blocks``: the visible receivers per screen block (see ``receiver_square``):
+      each stabilized cascade then covers only the square its receivers need, when that is
+      smaller than its slice's sphere; ``previous_squares`` (per cascade, the half widths
+      of the last frame) hold those squares still while they fit.
 
     An orthographic view whose clip start is not above 0 (Blender's orthographic viewport
     clips from behind the eye) cannot use logarithmic splits; it falls back to uniform
@@ -719,9 +741,16 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
             # size) is bit-for-bit the same while the camera turns.
             centre_view, radius = _view_space_sphere(view_corners)
             sphere = (_transform_points(world_from_view, centre_view[None])[0], radius)
+        square = None
+        if depth_blocks is not None and stabilize:
+            previous = previous_squares[index] if previous_squares is not None and \
+                index < len(previous_squares) else None
+            square = receiver_square(world_from_view, projection, depth_blocks, slice_near,
+                                     splits[index + 1], rotation, previous)
         fit = fit_cascade(corners, rotation, resolution, stabilize=stabilize,
                           occluder_margin=occluder_margin, scene_bounds=scene_bounds,
-                          bounding_sphere_world=sphere)
+                          bounding_sphere_world=sphere, receiver_box=square)
+        fit.receiver_half_width = None if square is None else square[1]
         fit.split_near, fit.split_far = float(splits[index]), float(splits[index + 1])
         cascades.append(fit)
     return CascadeSet(cascades=cascades, splits=splits, scheme=scheme, notes=tuple(notes))
@@ -730,6 +759,48 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
 # --------------------------------------------------------------------------------------
 # Caster culling
 # --------------------------------------------------------------------------------------
+
+def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
+                    light_from_world_rot, previous=None, shrink_below=0.7):
+    """The rectangle (centre_xy, half_widths_xy) in the rotated light frame that holds every
+    visible receiver between view depths ``near_depth`` and ``far_depth``, or None when no
+    receiver is there.
+
+    ``blocks``: (ndc_low (N, 2), ndc_high (N, 2), nearest (N,), farthest (N,)): screen
+    blocks and the view-depth range of what each shows (the G-buffer reduced on the GPU).
+    Each block's part of the slice is a small frustum piece; its 8 corners bound it.
+    NOTE: each half width is rounded up to 1/8 of its leading power of two, and the
+    ``previous`` half width is kept while the receivers still fit in it and it is less
+    than 1/``shrink_below`` of what they need: the texel size then changes rarely, and
+    only by whole steps."""
+    ndc_low, ndc_high, nearest, farthest = blocks
+    inside = (farthest >= near_depth) & (nearest <= far_depth)
+    if not np.any(inside):
+        return None
+    d0 = np.maximum(nearest[inside], near_depth)
+    d1 = np.minimum(farthest[inside], far_depth)
+    left, right, bottom, top = projection.view_window()
+    corners = []
+    for x_ndc in (ndc_low[inside, 0], ndc_high[inside, 0]):
+        for y_ndc in (ndc_low[inside, 1], ndc_high[inside, 1]):
+            x_unit = left + (x_ndc + 1.0) * 0.5 * (right - left)
+            y_unit = bottom + (y_ndc + 1.0) * 0.5 * (top - bottom)
+            for d in (d0, d1):
+                scale = d if projection.is_perspective else 1.0
+                corners.append(np.stack([x_unit * scale, y_unit * scale, -d], axis=-1))
+    view = np.concatenate(corners)
+    world = view @ np.asarray(world_from_view)[:3, :3].T + np.asarray(world_from_view)[:3, 3]
+    rot_xy = world @ _check_rotation(light_from_world_rot)[:2].T
+    low, high = rot_xy.min(axis=0), rot_xy.max(axis=0)
+    centre = 0.5 * (low + high)
+    needed = np.maximum(0.5 * (high - low), 1e-9)
+    half = np.array([_round_up_dyadic(float(n), bits=4) for n in needed])
+    if previous is not None:
+        previous = np.asarray(previous, dtype=np.float64)
+        keep = (needed <= previous) & (previous < half / shrink_below)
+        half = np.where(keep, previous, half)
+    return centre, half
+
 
 def visible_depth_range(nearest, farthest, previous=None, steps_per_octave=8,
                         shrink_below=0.75):

@@ -69,16 +69,34 @@ def instance_bounds(instances, meshes):
     return world.min(axis=1), world.max(axis=1)
 
 
-# Scene name -> the depth range the cascades were last fitted to (Fit to Visible Depth);
-# kept so that the next frame can hold it (cascades.visible_depth_range's hysteresis).
+# Scene name -> the depth range and per-cascade receiver squares the cascades were last
+# fitted to (Fit to Visible Depth); kept so that the next frame can hold them
+# (the hysteresis of cascades.visible_depth_range and cascades.receiver_square).
 _DEPTH_RANGES = {}
 
 
-def plan_shadows(snap, bounds, visible_depth=None):
+def depth_blocks_from_reduction(pairs, block_pixels, width, height):
+    """Screen blocks of the G-buffer reduction -> what ``cascades.receiver_square`` reads:
+    (ndc_low, ndc_high, nearest, farthest) of the blocks that show anything.
+    ``pairs``: (rows, cols, 2) nearest / farthest view depth per block (rows bottom-up;
+    nearest > 1e37 where a block shows only background)."""
+    pairs = np.asarray(pairs, dtype=np.float64)
+    rows, cols = np.nonzero(pairs[..., 0] < 1e37)
+    x0 = cols * block_pixels / width * 2.0 - 1.0
+    x1 = np.minimum((cols + 1) * block_pixels, width) / width * 2.0 - 1.0
+    y0 = rows * block_pixels / height * 2.0 - 1.0
+    y1 = np.minimum((rows + 1) * block_pixels, height) / height * 2.0 - 1.0
+    return (np.stack([x0, y0], axis=-1), np.stack([x1, y1], axis=-1),
+            pairs[rows, cols, 0], pairs[rows, cols, 1])
+
+
+def plan_shadows(snap, bounds, depth_blocks=None):
     """Cascade splits and light matrices for this frame (pure math, see cascades.py).
-    ``visible_depth``: (nearest, farthest) view depth in the G-buffer, measured when the
-    Fit to Visible Depth setting is on (sample-distribution shadow maps); None: the
-    cascades divide clip start .. shadow distance."""
+    ``depth_blocks``: what the G-buffer shows per screen block
+    (``depth_blocks_from_reduction``), measured when the Fit to Visible Depth setting is
+    on (sample-distribution shadow maps): the splits then divide the visible depth range
+    and each cascade covers only its receivers. None: the cascades divide clip start ..
+    shadow distance and cover their whole frustum slice."""
     s = snap.settings
     camera = snap.camera
     tiles = []
@@ -106,12 +124,15 @@ def plan_shadows(snap, bounds, visible_depth=None):
                 # Auto: the near plane reaches the scene's bounds, so no caster is clipped.
                 # Manual: exactly the margin the user typed, nothing added.
                 scene_bounds=bounds if s.occluder_margin_auto else None)
-            if visible_depth is not None and getattr(s, "fit_to_visible", False):
+            held = _DEPTH_RANGES.get(snap.scene_name, (None, None))
+            if depth_blocks is not None and len(depth_blocks[2]) and \
+                    getattr(s, "fit_to_visible", False):
                 fitted = cascades.visible_depth_range(
-                    *visible_depth, previous=_DEPTH_RANGES.get(snap.scene_name))
+                    float(depth_blocks[2].min()), float(depth_blocks[3].max()),
+                    previous=held[0])
                 if fitted is not None:
-                    _DEPTH_RANGES[snap.scene_name] = fitted
-                    arguments["depth_range"] = fitted
+                    arguments.update(depth_range=fitted, depth_blocks=depth_blocks,
+                                     previous_squares=held[1])
             try:
                 result = cascades.compute_cascades(
                     camera.world_from_view, camera.projection, -snap.sun.to_light,
@@ -125,6 +146,10 @@ def plan_shadows(snap, bounds, visible_depth=None):
                     camera.world_from_view, camera.projection, -snap.sun.to_light,
                     **arguments)
             warnings.extend(result.notes)
+            if "depth_range" in arguments:
+                _DEPTH_RANGES[snap.scene_name] = (
+                    arguments["depth_range"],
+                    [getattr(fit, "receiver_half_width", None) for fit in result.cascades])
             if s.freeze_cascades:
                 _FROZEN[key] = (result, camera)
                 frozen_camera = camera

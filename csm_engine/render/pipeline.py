@@ -26,7 +26,8 @@ import numpy as np
 
 from ..core import cascades
 from ..core.camera import world_positions
-from ..core.shadow_plan import (CASCADE_LINE_COLORS, front_to_back, instance_bounds,
+from ..core.shadow_plan import (CASCADE_LINE_COLORS, depth_blocks_from_reduction,
+                                front_to_back, instance_bounds,
                                 layout_atlas, pack_frame, plan_shadows)
 from ..core.material_layout import pack_material
 from . import shaders
@@ -357,9 +358,9 @@ class Pipeline:
             # Sample-distribution shadow maps: the G-buffer first, its nearest and farthest
             # view depth, then cascades fitted to that range, then their shadow maps.
             t, gbuffer = gbuffer_pass(t)
-            visible = self._visible_depth_range(gbuffer[2], width, height)
+            blocks = self._visible_depth_blocks(gbuffer[2], width, height)
             t = self._sync(gbuffer[4], "depth_range", t)
-            plan = plan_shadows(snap, bounds, visible)
+            plan = plan_shadows(snap, bounds, blocks)
             self.warnings.extend(w for w in plan.warnings if w not in self.warnings)
             atlas = self._atlas(plan)
             frame_ubo = self._frame_ubo(pack_frame(snap, plan))
@@ -608,18 +609,22 @@ class Pipeline:
         batch.draw(shader)
 
     # -- sample-distribution shadow maps ------------------------------------------------
-    def _visible_depth_range(self, view_depth, width, height):
-        """(nearest, farthest) view depth in the G-buffer, or None when it shows nothing:
-        4x4 min/max reductions on the GPU down to one pixel, then one pixel read back."""
+    # The G-buffer is reduced to blocks of this many pixels on a side (two 4x4 steps) and
+    # read back; the CPU fits the cascades to them (core/shadow_plan.py).
+    DEPTH_BLOCK_PIXELS = 16
+
+    def _visible_depth_blocks(self, view_depth, width, height):
+        """What the G-buffer shows per 16x16 block: nearest and farthest view depth, by two
+        4x4 min/max reductions on the GPU and one read-back of the small result
+        (``shadow_plan.depth_blocks_from_reduction``); None without a GPU."""
         import gpu
         source, is_view_depth = view_depth, 1
         size = (width, height)
-        level = 0
-        while True:
+        shader = shaders.LIBRARY.get("depth_range")
+        for level in range(2):
             size = (max((size[0] + 3) // 4, 1), max((size[1] + 3) // 4, 1))
             target = self._texture(f"depth_range_{level}", size, 'RGBA32F')
             fb = self._framebuffer(f"depth_range_{level}", colors=(target,))
-            shader = shaders.LIBRARY.get("depth_range")
             with fb.bind():
                 gpu.state.viewport_set(0, 0, size[0], size[1])
                 gpu.state.depth_test_set('NONE')
@@ -628,18 +633,14 @@ class Pipeline:
                 shader.uniform_int("source_is_view_depth", is_view_depth)
                 shader.uniform_sampler("source", source)
                 self._gpu_call(self._fullscreen_batch().draw, shader)
-                if size == (1, 1):
-                    if self.skip_gpu_calls:
-                        return None
-                    pixel = gpu.types.Buffer('FLOAT', 4)
-                    fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT', data=pixel)
-                    nearest, farthest = float(pixel[0]), float(pixel[1])
-                    break
             source, is_view_depth = target, 0
-            level += 1
-        if not 0.0 < nearest <= farthest < 1e37:
+        if self.skip_gpu_calls:
             return None
-        return nearest, farthest
+        buffer = gpu.types.Buffer('FLOAT', size[0] * size[1] * 4)
+        with fb.bind():
+            fb.read_color(0, 0, size[0], size[1], 4, 0, 'FLOAT', data=buffer)
+        pairs = np.frombuffer(buffer, dtype=np.float32).reshape(size[1], size[0], 4)[..., :2]
+        return depth_blocks_from_reduction(pairs, self.DEPTH_BLOCK_PIXELS, width, height)
 
     # -- anti-aliasing -------------------------------------------------------------------
     def _fullscreen_pass(self, program, target_fb, width, height, samplers, floats=()):
