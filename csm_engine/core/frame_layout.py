@@ -349,7 +349,6 @@ FRAME_LAYOUT = UniformLayout("FrameData", (
     ("depth_bias_texels", "float", "constant depth bias (shadow texels)"),
     ("slope_bias_texels", "float", "depth bias per unit of tan(light angle) (texels)"),
     ("normal_offset_texels", "float", "lookup moved along the normal (shadow texels)"),
-    ("shadow_filter", "int", "FILTER_* edge filter for sun and spot shadows"),
     ("sun_tan_half_angle", "float", "tan of half the sun's angular diameter (Blender's "
                                     "Angle): penumbra width per unit of blocker distance"),
     ("sample_index", "int", "which jittered sample of a final render this is (0 in the "

@@ -16,7 +16,7 @@ from . import cascades
 from .frame import spot_cone_cosines
 from .frame_layout import (DEBUG_VIEW_INDEX, FRAME_LAYOUT, LIGHT_FALLOFF_INDEX, MAX_CASCADES,
                            MAX_POINT_LIGHTS, MAX_SHADOW_TILES, MAX_SPOT_LIGHTS,
-                           PCF_PATTERN_INDEX, SHADOW_FILTER_INDEX)
+                           PCF_PATTERN_INDEX)
 
 CASCADE_LINE_COLORS = ((1, .2, .2, 1), (.2, 1, .2, 1), (.3, .4, 1, 1), (1, 1, .2, 1))
 
@@ -311,7 +311,6 @@ def pack_frame(snap, plan):
         depth_bias_texels=s.depth_bias,
         slope_bias_texels=s.slope_bias,
         normal_offset_texels=s.normal_offset,
-        shadow_filter=SHADOW_FILTER_INDEX[getattr(s, "shadow_filter", "PCF")],
         sample_index=getattr(snap, "sample_index", 0),
         sun_tan_half_angle=sun_tan_half_angle(sun),
         point_light_count=len(points),

@@ -93,6 +93,10 @@ class _DrawMaterial:
         self.shadow_key = shadow_key
 
 
+# The lighting program of each Shadow Filter setting (shaders.py builds one per filter).
+LIGHTING_PROGRAMS = {"HARD": "lighting_hard", "PCF": "lighting", "SOFT": "lighting_soft"}
+
+
 class RenderTargetError(Exception):
     """A render target or shadow map could not be allocated; the message says which and
     how large."""
@@ -377,7 +381,8 @@ class Pipeline:
             t = self._sync(self.ao_fb, "ao", t)
 
         # 3. Lighting (+ debug views) into the target
-        lighting = library.get("lighting")
+        lighting = library.get(LIGHTING_PROGRAMS.get(
+            getattr(snap.settings, "shadow_filter", "PCF"), "lighting"))
 
         def light_pass():
             gpu.state.viewport_set(0, 0, width, height)

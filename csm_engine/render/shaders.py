@@ -137,6 +137,12 @@ PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
                            defines=(("AO_BLUR", "1"),))
 PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),)
 
+# One lighting program per Shadow Filter setting (SHADOW_FILTER, see common.glsl): the
+# plain "lighting" is PCF.
+for _filter in ("HARD", "SOFT"):
+    PROGRAMS["lighting_" + _filter.lower()] = dict(
+        PROGRAMS["lighting"], defines=(("SHADOW_FILTER", f"FILTER_{_filter}"),))
+
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
 
 

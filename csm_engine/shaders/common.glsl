@@ -73,10 +73,18 @@ vec2 receiver_depth_per_texel(ShadowTileData tile, vec3 n)
   return length_slope > bound ? slope * (bound / length_slope) : slope;
 }
 
+/* NOTE: the filter is chosen when the program is built (SHADOW_FILTER, one program per
+ * Shadow Filter setting), not by a uniform: llvmpipe runs the code of a branch not taken
+ * as well, so the soft filter's loops in the same program made PCF 2.4x slower. */
+#ifndef SHADOW_FILTER
+#  define SHADOW_FILTER FILTER_PCF
+#endif
+
+#if SHADOW_FILTER == FILTER_SOFT
 /* Soft shadows (PCSS, after Fernando 2005): how far the penumbra reaches depends on how far
  * the receiver is behind its blockers, and on the light's size. */
-const int BLOCKER_SAMPLES = 16;
-const int SOFT_FILTER_SAMPLES = 16;
+const int BLOCKER_SAMPLES = 12;
+const int SOFT_FILTER_SAMPLES = 12;
 /* Widest blocker search and penumbra radius, in texels of the tile: beyond this a soft
  * shadow is cut to this width (a cascade's texels are its own unit, so the same number
  * holds in every cascade). */
@@ -185,6 +193,7 @@ float soft_shadow(ShadowTileData tile, float light_size, vec2 texel, float compa
   }
   return lit / float(SOFT_FILTER_SAMPLES);
 }
+#endif
 
 /* Visibility (1 lit, 0 shadowed) of world point p with normal n from shadow tile t.
  * light_size: the sun's tan(half angle), or a spot light's radius (scene units); used by
@@ -223,11 +232,12 @@ float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l, float light_s
   float last_texel = tile.resolution - 1.0;
   vec2 texel = s.xy * tile.resolution;
 
-  if (frame.shadow_filter == FILTER_SOFT) {
-    return soft_shadow(tile, light_size, texel, compare, depth_per_texel, receiver,
-                       texel_world);
-  }
-  int radius = frame.shadow_filter == FILTER_HARD ? 0 : int(pcf_radius);
+#if SHADOW_FILTER == FILTER_SOFT
+  return soft_shadow(tile, light_size, texel, compare, depth_per_texel, receiver, texel_world);
+#elif SHADOW_FILTER == FILTER_HARD
+  return shadow_tap(origin, last_texel, texel, texel, compare, depth_per_texel);
+#else
+  int radius = int(pcf_radius);
   int pattern = frame.pcf_pattern;
   if (radius == 0) {
     return shadow_tap(origin, last_texel, texel, texel, compare, depth_per_texel);
@@ -270,6 +280,7 @@ float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l, float light_s
     }
   }
   return lit / taps;
+#endif
 }
 
 /* Index of the cascade whose slice holds this view depth, or -1 beyond the last. */
