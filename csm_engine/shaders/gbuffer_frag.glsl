@@ -35,7 +35,10 @@ void main()
 #ifdef ALPHA_MASK
   /* Only this variant may discard: see shaders.py on early depth tests. CLIP cuts out below
    * the cutoff (Sponza's foliage); HASHED keeps a pixel when alpha beats the hash. */
-  if (material.alpha_mode == ALPHA_HASHED ? base.a <= alpha_hash(gl_FragCoord.xy)
+  /* Each jittered render sample turns the threshold by the golden ratio, so averaged
+   * samples blend partial alpha smoothly instead of keeping one dither pattern. */
+  float threshold = fract(alpha_hash(gl_FragCoord.xy) + 0.618034 * float(frame.sample_index));
+  if (material.alpha_mode == ALPHA_HASHED ? base.a <= threshold
                                           : base.a < material.alpha_cutoff) {
     discard;
   }

@@ -525,3 +525,16 @@ def test_course_scene_import_reads_specular_in_blue_and_shininess_in_green(empty
     assert color[0] == pytest.approx(0.75, abs=0.02), f"specular from blue: {color}"
     assert color[1] == pytest.approx(0.25, abs=0.02), f"shininess / 256 from green: {color}"
     assert color[2] == 0.0, f"not metal although blue is 0.75: {color}"
+
+
+def test_render_samples_blend_hashed_alpha_smoothly(empty_scene):
+    """With one sample a 50% Blend plane is a dither of plane and ground pixels; with 16
+    render samples each pixel averages thresholds turned by the sample index, so the image
+    over the plane is nearly uniform: the mean of plane and ground."""
+    scene = empty_scene
+    scene.csm.fxaa = False
+    one = _half_transparent_plane(scene, 0.5)["combined"][44:84, 44:84, :3].mean(axis=-1)
+    scene.csm.render_samples = 16
+    many = render_scene(scene, 128, 128)["combined"][44:84, 44:84, :3].mean(axis=-1)
+    assert many.mean() == pytest.approx(one.mean(), rel=0.1)
+    assert many.std() < 0.35 * one.std(), (many.std(), one.std())
