@@ -170,21 +170,12 @@ float soft_shadow(ShadowTileData tile, float light_size, vec2 texel, float compa
   float blocker_linear = shadow_linear_depth(blocker_window / blockers, tile);
   float radius = min(penumbra_radius_texels(tile, light_size, receiver_linear, blocker_linear,
                                             texel_world), SOFT_RADIUS_LIMIT_TEXELS);
-  if (radius < 1.5) {
-    /* Narrow penumbra: the 3x3 bilinear kernel (PCF radius 1) resolves it smoothly. */
-    float lit = 0.0;
-    vec2 t = texel - 0.5;
-    vec2 base = floor(t);
-    vec2 f = t - base;
-    for (int y = 0; y <= 3; y++) {
-      float wy = (y == 0) ? 1.0 - f.y : ((y == 3) ? f.y : 1.0);
-      for (int x = 0; x <= 3; x++) {
-        float wx = (x == 0) ? 1.0 - f.x : ((x == 3) ? f.x : 1.0);
-        vec2 center = base + vec2(float(x - 1), float(y - 1)) + 0.5;
-        lit += wx * wy * shadow_tap(origin, last_texel, center, texel, compare, depth_per_texel);
-      }
-    }
-    return lit / 9.0;
+  /* A penumbra narrower than a texel is one bilinear tap (an edge spread over +-0.5
+   * texel); wider ones, a disk of bilinear taps as wide as the penumbra (the sun's disk
+   * gives the same profile: the part of a disk an edge covers). */
+  radius = radius - 0.25;
+  if (radius < 0.5) {
+    return shadow_tap_bilinear(origin, last_texel, texel, texel, compare, depth_per_texel);
   }
   float lit = 0.0;
   for (int i = 0; i < SOFT_FILTER_SAMPLES; i++) {
