@@ -137,7 +137,7 @@ class CSMSettings(bpy.types.PropertyGroup):
         description="View depth (scene units) up to which the sun casts shadows. "
                     "0 uses the camera's far clip")
     fit_to_visible: BoolProperty(
-        name="Fit to Visible Depth", default=False, update=_redraw,
+        name="Fit to Visible Depth", default=True, update=_redraw,
         description="Sample-distribution shadow maps: the splits divide the nearest to "
                     "farthest depth the camera actually sees (measured on the GPU each frame) "
                     "instead of clip start to shadow distance, so no cascade is spent on "
@@ -190,11 +190,11 @@ class CSMSettings(bpy.types.PropertyGroup):
         description="Depth offset in shadow texels, the same for all cascades (scaled to each "
                     "cascade's texel size). Too low: acne. Too high: peter-panning")
     slope_bias: FloatProperty(
-        name="Slope Bias", default=0.25, min=0.0, soft_max=10.0, update=_redraw,
+        name="Slope Bias", default=1.0, min=0.0, soft_max=10.0, update=_redraw,
         description="Extra depth offset in texels that grows with the surface slope to the "
                     "sun. Too low: acne on surfaces the sun grazes. Too high: shadows detach")
     normal_offset: FloatProperty(
-        name="Normal Offset", default=0.5, min=0.0, soft_max=10.0, update=_redraw,
+        name="Normal Offset", default=0.0, min=0.0, soft_max=10.0, update=_redraw,
         description="Moves the lookup point along the surface normal by this many texels. "
                     "Removes acne at grazing angles; too much shifts shadow edges")
     cull_front_faces: BoolProperty(

@@ -597,6 +597,13 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
         low_xy, high_xy = centre_xy - half, centre_xy + half
         nearest_depth = -centre_rot[2] - depth_radius    # along the light, slice side
         farthest_depth = -centre_rot[2] + depth_radius
+        if receiver_box is not None:
+            # NOTE: the sphere follows the camera, so its depth range moves with every
+            # step; widened to a coarse grid (1/16 of the radius), it stays put while the
+            # receivers' rectangle does, and so does the whole shadow map.
+            step = _round_up_dyadic(depth_radius / 16.0, bits=1)
+            nearest_depth = math.floor(nearest_depth / step) * step
+            farthest_depth = math.ceil(farthest_depth / step) * step
         texel_xy = texel
         sphere_centre = centre_world
     else:
@@ -750,7 +757,7 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
         fit = fit_cascade(corners, rotation, resolution, stabilize=stabilize,
                           occluder_margin=occluder_margin, scene_bounds=scene_bounds,
                           bounding_sphere_world=sphere, receiver_box=square)
-        fit.receiver_half_width = None if square is None else square[1]
+        fit.receiver_rectangle = square
         fit.split_near, fit.split_far = float(splits[index]), float(splits[index + 1])
         cascades.append(fit)
     return CascadeSet(cascades=cascades, splits=splits, scheme=scheme, notes=tuple(notes))
@@ -770,9 +777,9 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
     blocks and the view-depth range of what each shows (the G-buffer reduced on the GPU).
     Each block's part of the slice is a small frustum piece; its 8 corners bound it.
     NOTE: each half width is rounded up to 1/8 of its leading power of two, and the
-    ``previous`` half width is kept while the receivers still fit in it and it is less
-    than 1/``shrink_below`` of what they need: the texel size then changes rarely, and
-    only by whole steps."""
+    ``previous`` rectangle (centre, half widths) is kept while the receivers still fit in
+    it and it is less than 1/``shrink_below`` of what they need: small camera moves then
+    leave the cascade where it was, and the texel size changes rarely, by whole steps."""
     ndc_low, ndc_high, nearest, farthest = blocks
     inside = (farthest >= near_depth) & (nearest <= far_depth)
     if not np.any(inside):
@@ -796,9 +803,12 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
     needed = np.maximum(0.5 * (high - low), 1e-9)
     half = np.array([_round_up_dyadic(float(n), bits=4) for n in needed])
     if previous is not None:
-        previous = np.asarray(previous, dtype=np.float64)
-        keep = (needed <= previous) & (previous < half / shrink_below)
-        half = np.where(keep, previous, half)
+        old_centre, old_half = (np.asarray(v, dtype=np.float64) for v in previous)
+        # The whole previous rectangle, while it holds every receiver and is not much too
+        # big: the cascade then does not move at all (its shadow map can be kept).
+        if np.all(low >= old_centre - old_half) and np.all(high <= old_centre + old_half) \
+                and np.all(old_half < half / shrink_below):
+            return old_centre, old_half
     return centre, half
 
 

@@ -124,7 +124,10 @@ def plan_shadows(snap, bounds, depth_blocks=None):
                 # Auto: the near plane reaches the scene's bounds, so no caster is clipped.
                 # Manual: exactly the margin the user typed, nothing added.
                 scene_bounds=bounds if s.occluder_margin_auto else None)
-            held = _DEPTH_RANGES.get(snap.scene_name, (None, None))
+            # NOTE: only viewport frames hold the last frame's fit (so the view does not
+            # pop while it moves); a final render depends on nothing but its own scene.
+            held = _DEPTH_RANGES.get(snap.scene_name, (None, None)) \
+                if getattr(snap, "is_viewport", False) else (None, None)
             if depth_blocks is not None and len(depth_blocks[2]) and \
                     getattr(s, "fit_to_visible", False):
                 fitted = cascades.visible_depth_range(
@@ -149,7 +152,7 @@ def plan_shadows(snap, bounds, depth_blocks=None):
             if "depth_range" in arguments:
                 _DEPTH_RANGES[snap.scene_name] = (
                     arguments["depth_range"],
-                    [getattr(fit, "receiver_half_width", None) for fit in result.cascades])
+                    [getattr(fit, "receiver_rectangle", None) for fit in result.cascades])
             if s.freeze_cascades:
                 _FROZEN[key] = (result, camera)
                 frozen_camera = camera

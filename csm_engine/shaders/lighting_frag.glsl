@@ -75,6 +75,21 @@ void main()
 
   vec3 p = world_position_at(screen_uv, depth);
   vec3 n = normalize(normal_shine.xyz);
+  /* The surface's own (geometric) plane, from how the position changes to the next pixels:
+   * the shadow lookup's receiver plane and normal offset use it, because the map holds
+   * the geometry's depth, not the smooth shading normal's idea of it (a smooth low-poly
+   * terrain's shading normals, or a normal map, tilt away from its facets and would
+   * misplace every tap). Where the depth jumps to the next pixel (a silhouette: the
+   * neighbour is another surface) the shading normal is kept. */
+  vec3 shadow_normal = n;
+  vec3 facet = cross(dFdx(p), dFdy(p));
+  float depth_step = max(abs(dFdx(depth)), abs(dFdy(depth)));
+  if (dot(facet, facet) > 1e-20 && depth_step < 0.05 * depth) {
+    facet = normalize(facet);
+    vec3 towards_camera = frame.is_perspective != 0 ? frame.camera_position - p :
+                                                      -frame.camera_forward;
+    shadow_normal = dot(facet, towards_camera) < 0.0 ? -facet : facet;
+  }
   vec3 albedo = albedo_spec.rgb;
   float specular = albedo_spec.a;
   float shininess = normal_shine.w;
@@ -97,7 +112,8 @@ void main()
     float n_dot_l = dot(n, l);
     if (frame.sun_casts_shadow != 0) {
       if (n_dot_l > 0.0) {
-        sun_vis = sun_visibility(p, n, n_dot_l, view_depth, cascade);
+        sun_vis = sun_visibility(p, shadow_normal, dot(shadow_normal, l), view_depth,
+                                 cascade);
       }
       else {
         /* Facing away from the sun: in its own shadow, whatever the map says (and no taps
@@ -140,7 +156,8 @@ void main()
     if (attenuation > 0.0) {
       float vis = 1.0;
       if (spot.shadow_tile >= 0) {
-        vis = shadow_tile_visibility(spot.shadow_tile, p, n, dot(n, l), spot.source_radius);
+        vis = shadow_tile_visibility(spot.shadow_tile, p, shadow_normal,
+                                     dot(shadow_normal, l), spot.source_radius);
       }
       color += spot.color * attenuation * vis *
                surface_brdf(albedo, metallic, specular, shininess, n, l, to_camera);

@@ -120,6 +120,7 @@ def long_ground(empty_scene):
     add_camera(scene, (0, -5, 4), (0, 60, 0), lens=30, clip_end=300)
     scene.csm.debug_view = 'CASCADES'
     scene.csm.split_lambda = 0.75      # splits at ~43 and ~150 m: both well on screen
+    scene.csm.fit_to_visible = False   # the splits over clip start .. far, as written above
     return scene
 
 
@@ -191,6 +192,8 @@ def test_stabilized_shadows_hold_still_while_the_camera_moves_less_than_a_texel(
     width, height = 400, 400
     pixel = camera.data.ortho_scale / width        # 0.1 scene units
     scene.csm.resolution = 1024                    # texels of at least 0.12 units
+    # The whole frustum's fit: the texel size depends only on the camera's slices.
+    scene.csm.fit_to_visible = False
 
     def shadow_mask(x):
         camera.location.x = x

@@ -63,11 +63,13 @@ def test_camera_only_and_lighting_only_redraws_keep_shadow_tiles(empty_scene):
     lit, _ = _draw(renderer, cache, scene)
     assert renderer.shadow_tiles == {"drawn": 0, "skipped": 3}
 
-    # A small camera move redraws the near cascade; any tile kept must match a fresh draw.
+    # A small camera move keeps the far cascades (Fit to Visible Depth, the default, holds
+    # every cascade's rectangle and depth while the receivers fit in it; the plain fit
+    # redraws the near cascade); any tile kept must match a fresh draw.
     moved = camera.world_from_view.copy()
     moved[:3, 3] += (0.02, 0.01, 0.0)
     kept, _ = _draw(renderer, cache, scene, moved)
-    assert renderer.shadow_tiles["drawn"] >= 1 and renderer.shadow_tiles["skipped"] >= 1
+    assert renderer.shadow_tiles["skipped"] >= 2
     fresh, _ = _draw(pipeline.Pipeline(), mesh_cache.MeshCache(), scene, moved)
     assert np.abs(kept - fresh).max() < 1e-5
 
