@@ -55,6 +55,8 @@ SWEEPS = (
     ("split_lambda", (0.0, 0.25, 0.5, 0.75, 0.9, 1.0)),
     ("resolution", (512, 1024, 2048, 4096)),
     ("stabilize", (False, True)),
+    ("shadow_filter", ("HARD", "PCF", "SOFT")),
+    ("fit_to_visible", (False, True)),
 )
 QUICK_SWEEPS = (("depth_bias", (1.0, 8.0)),)
 
@@ -66,8 +68,10 @@ ACNE_TECHNIQUES = (
     ("front_face_culling", "front-face culling only", dict(NO_BIAS, cull_front_faces=True)),
     ("constant", "constant offset only", dict(NO_BIAS, depth_bias=None)),
     ("slope", "slope-scaled bias only", dict(NO_BIAS, slope_bias=None)),
-    ("normal_offset", "normal offset only", dict(NO_BIAS, normal_offset=None)),
-    ("defaults", "defaults (constant + slope + normal offset)", {}),
+    # NOTE: the normal offset's default is 0 (the receiver plane needs none), so this
+    # technique shows it at the old default, 0.5 texel.
+    ("normal_offset", "normal offset only", dict(NO_BIAS, normal_offset=0.5)),
+    ("defaults", "defaults (constant + slope bias, receiver plane)", {}),
 )
 QUICK_ACNE = ("none", "defaults")
 
@@ -80,6 +84,8 @@ METRICS = (("mismatch_percent", "mismatch"), ("false_shadow_percent", "false sha
 def _format_value(value):
     if isinstance(value, bool):
         return "on" if value else "off"
+    if isinstance(value, str):
+        return value
     return f"{value:g}"
 
 
@@ -139,11 +145,15 @@ def _plot_sweeps(points, sweeps, defaults, scenes, images):
         for scene in scenes:
             rows = [p for p in points if p["scene"] == scene and p["group"] == "sweep"
                     and p["setting"] == setting]
-            xs = [float(p["value"]) for p in rows]
+            # Enum settings plot at their positions in the sweep.
+            xs = [values.index(p["value"]) if isinstance(p["value"], str)
+                  else float(p["value"]) for p in rows]
             for ax, (key, title) in zip(axes, METRICS):
                 ax.plot(xs, [p["result"][key] for p in rows], marker="o", label=scene)
         for ax, (key, title) in zip(axes, METRICS):
-            ax.axvline(float(defaults[setting]), color="grey", linestyle="--",
+            default = defaults[setting]
+            ax.axvline(values.index(default) if isinstance(default, str) else float(default),
+                       color="grey", linestyle="--",
                        label=f"default {_format_value(defaults[setting])}")
             ax.set_title(f"{title} %")
             ax.set_xlabel(setting)
@@ -155,8 +165,10 @@ def _plot_sweeps(points, sweeps, defaults, scenes, images):
             ax.grid(True, alpha=0.3)
             if setting == "resolution":
                 ax.set_xscale("log", base=2)
-            if setting == "stabilize":
+            if setting in ("stabilize", "fit_to_visible"):
                 ax.set_xticks([0, 1], ["off", "on"])
+            if isinstance(values[0], str):
+                ax.set_xticks(range(len(values)), list(values))
         axes[0].set_ylabel("% of compared pixels")
         axes[0].legend(fontsize=8)
         fig.tight_layout()
