@@ -60,32 +60,6 @@ def side_by_side(paths, out):
     print("wrote", os.path.relpath(out, REPO))
 
 
-def magnified_crops(paths, out, box, zoom=3):
-    """The same ``box`` (x, y, width, height; top-left origin, pixels) of each PNG, enlarged
-    ``zoom`` times with square pixels, left to right: stair steps stay visible."""
-    import bpy
-    x, y, w, h = box
-    crops = []
-    for path in paths:
-        image = bpy.data.images.load(path, check_existing=False)
-        width, height = image.size
-        pixels = np.empty(width * height * 4, dtype=np.float32)
-        image.pixels.foreach_get(pixels)
-        bpy.data.images.remove(image)
-        top_first = pixels.reshape(height, width, 4)[::-1]
-        crop = top_first[y:y + h, x:x + w].repeat(zoom, axis=0).repeat(zoom, axis=1)
-        crop[:, :2] = (1, 1, 1, 1)                          # a thin white divider
-        crops.append(crop)
-    canvas = np.concatenate(crops, axis=1)[::-1]
-    joined = bpy.data.images.new("crops", canvas.shape[1], canvas.shape[0], alpha=True)
-    joined.pixels.foreach_set(np.ascontiguousarray(canvas).ravel())
-    joined.filepath_raw = out
-    joined.file_format = 'PNG'
-    joined.save()
-    bpy.data.images.remove(joined)
-    print("wrote", os.path.relpath(out, REPO))
-
-
 def main():
     parser = argparse.ArgumentParser(description=__doc__,
                                      formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -108,18 +82,6 @@ def main():
            debug_shadow_map=2)
     render(scene, os.path.join(OUT, "debug_shadow_map_inset.png"), debug_inset=True,
            debug_shadow_map=2)
-
-    # Anti-aliasing: none, FXAA (the viewport's, and one-sample renders'), 8 render samples.
-    paths_ = []
-    for name, samples, fxaa in (("none", 1, False), ("fxaa", 1, True), ("samples", 8, True)):
-        path = os.path.join(OUT, f"aa_{name}.png")
-        render(scene, path, render_samples=samples, fxaa=fxaa)
-        paths_.append(path)
-    width, height = scene.render.resolution_x, scene.render.resolution_y
-    box = (int(width * 0.47), int(height * 0.42), width // 6, height // 6)
-    magnified_crops(paths_, os.path.join(OUT, "antialiasing.png"), box)
-    for path in paths_:
-        os.remove(path)
 
     # Split schemes from a camera that sees near and far content, so all cascades show.
     camera = scene.camera
