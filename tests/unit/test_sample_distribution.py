@@ -1,0 +1,97 @@
+"""Fitting cascades to what the camera sees (core/cascades.py: visible_depth_range,
+receiver_square; core/shadow_plan.py: depth_blocks_from_reduction,
+window_normal_from_world)."""
+import math
+
+import numpy as np
+import pytest
+
+from csm_engine.core import cascades
+from csm_engine.core.camera import CameraProjection
+from csm_engine.core.shadow_plan import (WINDOW_FROM_CLIP, depth_blocks_from_reduction,
+                                         window_normal_from_world)
+
+PROJECTION = CameraProjection(kind="PERSP", fov_y=math.radians(50), aspect=16 / 9,
+                              clip_start=0.1, clip_end=500.0)
+ROTATION = cascades.light_view_matrix(np.array([0.3, 0.2, -1.0]))
+
+
+def _blocks(near, far, rows=9, cols=16):
+    pairs = np.empty((rows, cols, 2))
+    pairs[..., 0], pairs[..., 1] = near, far
+    pairs[0, 0] = (3.0e38, 0.0)                     # one block of background
+    return depth_blocks_from_reduction(pairs, 16, cols * 16, rows * 16)
+
+
+def test_blocks_skip_background_and_cover_the_screen():
+    low, high, nearest, farthest = _blocks(10.0, 40.0)
+    assert len(nearest) == 9 * 16 - 1
+    assert low.min() == pytest.approx(-1.0) and high.max() == pytest.approx(1.0)
+    assert np.all(nearest == 10.0) and np.all(farthest == 40.0)
+
+
+def test_receiver_rectangle_holds_every_receiver_of_the_slice():
+    world_from_view = np.eye(4)
+    world_from_view[:3, 3] = (5.0, -3.0, 2.0)
+    blocks = _blocks(10.0, 40.0)
+    centre, half = cascades.receiver_square(world_from_view, PROJECTION, blocks, 15.0, 30.0,
+                                            ROTATION)
+    # Points the slice shows: every pixel corner at depths 15 and 30.
+    left, right, bottom, top = PROJECTION.view_window()
+    points = []
+    for x in np.linspace(left, right, 9):
+        for y in np.linspace(bottom, top, 9):
+            for d in (15.0, 30.0):
+                points.append(world_from_view[:3, :3] @ (x * d, y * d, -d) +
+                              world_from_view[:3, 3])
+    rot = np.asarray(points) @ ROTATION[:3, :3].T[:, :2]
+    assert np.all(rot >= centre - half - 1e-9) and np.all(rot <= centre + half + 1e-9)
+    # ... and no more than the slice needs (rounding up costs at most 1/8).
+    assert np.all(half <= 1.13 * 0.5 * (rot.max(axis=0) - rot.min(axis=0)))
+    assert cascades.receiver_square(world_from_view, PROJECTION, blocks, 50.0, 60.0,
+                                    ROTATION) is None
+
+
+def test_receiver_rectangle_holds_still_while_the_receivers_fit():
+    blocks = _blocks(10.0, 40.0)
+    first = cascades.receiver_square(np.eye(4), PROJECTION, blocks, 15.0, 30.0, ROTATION)
+    moved = np.eye(4)
+    moved[:3, 3] = (0.01, 0.0, 0.0)
+    held = cascades.receiver_square(moved, PROJECTION, blocks, 15.0, 30.0, ROTATION, first)
+    assert held[0] is first[0] and held[1] is first[1]
+    far = np.eye(4)
+    far[:3, 3] = (50.0, 0.0, 0.0)
+    assert not np.array_equal(cascades.receiver_square(far, PROJECTION, blocks, 15.0, 30.0,
+                                                       ROTATION, first)[0], first[0])
+
+
+def test_fitted_cascades_use_smaller_texels_than_the_sphere():
+    blocks = _blocks(20.0, 60.0)
+    plain = cascades.compute_cascades(np.eye(4), PROJECTION, np.array([0.3, 0.2, -1.0]))
+    fitted = cascades.compute_cascades(np.eye(4), PROJECTION, np.array([0.3, 0.2, -1.0]),
+                                       depth_range=(20.0, 60.0), depth_blocks=blocks)
+    assert fitted.splits[0] == 20.0 and fitted.splits[-1] == 60.0
+    for a, b in zip(plain.cascades, fitted.cascades):
+        assert b.texel_size_world < a.texel_size_world
+
+
+def test_window_normal_gives_the_receiver_planes_depth_slope():
+    fit = cascades.compute_cascades(np.eye(4), PROJECTION, np.array([0.3, 0.2, -1.0]),
+                                    count=1).cascades[0]
+
+    class Tile:
+        is_perspective = False
+        clip_from_world = fit.clip_from_world
+
+    normal_from_world = window_normal_from_world(Tile)
+    window_from_world = WINDOW_FROM_CLIP @ fit.clip_from_world
+    # A tilted plane through p: moving along it changes window depth as the slope says.
+    n = np.array([0.2, -0.3, 1.0])
+    n /= np.linalg.norm(n)
+    p = np.array([1.0, 2.0, -20.0])
+    along = np.cross(n, [1.0, 0.0, 0.0])
+    w0 = window_from_world @ np.append(p, 1.0)
+    w1 = window_from_world @ np.append(p + along, 1.0)
+    wn = normal_from_world[:3, :3] @ n
+    predicted = -(wn[0] * (w1[0] - w0[0]) + wn[1] * (w1[1] - w0[1])) / wn[2]
+    assert w1[2] - w0[2] == pytest.approx(predicted, rel=1e-9, abs=1e-12)
