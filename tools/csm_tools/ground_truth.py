@@ -977,8 +977,12 @@ def run_all(args, argv, prog):
     shadow_filter = None if _user_sets(args.overrides, "shadow_filter") else "auto"
     started = time.monotonic()
     runs, skipped = [], {}
-    for name in args.scenes:
-        for angle in [0.0] + list(args.sun_angles):
+    # Angle by angle (hard mode on every scene first): a suite stopped half-way has
+    # whole tables rather than one scene in every mode.
+    for angle in [0.0] + list(args.sun_angles):
+        for name in args.scenes:
+            if name in skipped:
+                continue
             size = soft_size if angle > 0.0 else hard_size
             t0 = time.monotonic()
             try:
@@ -988,7 +992,7 @@ def run_all(args, argv, prog):
                     raise
                 skipped[name] = str(error)
                 print(f"[ground truth] {name}: skipped ({error})", flush=True)
-                break
+                continue
             _check_cycles(scene)
             label = "hard" if angle == 0.0 else f"soft{angle:g}"
             heat = os.path.join(images, f"ground_truth_{os.path.basename(name)}_{label}.png")
