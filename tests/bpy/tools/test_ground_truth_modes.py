@@ -197,14 +197,14 @@ def test_the_sun_angle_reaches_every_engine_and_is_restored():
 
 
 def test_csm_penumbra_widens_with_its_kernel_in_soft_mode():
-    """A wrong kernel shows: no PCF gives CSM a narrower penumbra than Cycles' 10 degree
-    sun, a 3-texel PCF a wider one than no PCF."""
-    narrow = ground_truth.measure_report(shadow_test("pcf_radius=0"), 240, 135,
-                                         sun_angle=10.0, eevee=False,
-                                         cycles_samples=SOFT_SAMPLES)
-    wide = ground_truth.measure_report(shadow_test("pcf_radius=3"), 240, 135,
-                                       sun_angle=10.0, eevee=False,
-                                       cycles_samples=SOFT_SAMPLES)
+    """A wrong kernel shows: the fixed PCF filter without a kernel gives CSM a narrower
+    penumbra than Cycles' 10 degree sun, a 3-texel PCF a wider one than no PCF."""
+    narrow = ground_truth.measure_report(shadow_test("shadow_filter=PCF", "pcf_radius=0"),
+                                         240, 135, sun_angle=10.0, eevee=False,
+                                         cycles_samples=SOFT_SAMPLES, csm_shadow_filter=None)
+    wide = ground_truth.measure_report(shadow_test("shadow_filter=PCF", "pcf_radius=3"),
+                                       240, 135, sun_angle=10.0, eevee=False,
+                                       cycles_samples=SOFT_SAMPLES, csm_shadow_filter=None)
     assert narrow.csm.penumbra_width_error_percent < -30.0
     assert wide.csm.penumbra_pixels > 1.5 * narrow.csm.penumbra_pixels
 
