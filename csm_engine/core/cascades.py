@@ -716,19 +716,14 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
                      f"view clips from {near}, so uniform splits are used")
         scheme = "UNIFORM"
     first, last = near, far
-    if depth_range is not None:
+    # NOTE: manual splits are distances the user typed: they are kept as typed (only the
+    # cascades' rectangles are fitted to the receivers, below).
+    if depth_range is not None and scheme != "MANUAL":
         low, high = (finite("depth range", v) for v in depth_range)
         first = min(max(low, near), far)
         last = min(max(high, first), far)
         if not last > first:
             last = min(far, first + max(1e-3 * first, 1e-6))
-        if scheme == "MANUAL" and manual is not None:
-            # Manual splits are distances the user typed: keep those inside the range.
-            manual = [d for d in manual if first < d < last]
-            if len(manual) != count - 1:
-                scheme = "HYBRID"
-                notes.append("manual splits fall outside the visible depth range; "
-                             "hybrid splits are used")
     splits = split_distances(first, last, count, scheme, lam=lam, manual=manual)
     resolutions = cascade_resolutions(len(splits) - 1, base_resolution, equal_resolution)
     rotation = light_view_matrix(light_dir, up_hint)
