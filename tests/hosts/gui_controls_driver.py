@@ -77,7 +77,7 @@ DEBUG_VIEW_FROM_BOTTOM_PX = 300  # bottom-left corner with the sidebar scrolled 
 CSM_TAB_FROM_RIGHT_PX = 12   # the "CSM" sidebar tab, from the region's top-right corner
 CSM_TAB_FROM_TOP_PX = 160
 STABILIZE_FROM_LEFT_PX = 89  # the Cascades panel's "Stabilize" checkbox, from the sidebar's
-STABILIZE_FROM_TOP_PX = 183  # top-left corner (same fixed window, CSM tab open)
+STABILIZE_FROM_TOP_PX = 206  # top-left corner (same fixed window, CSM tab open)
 SUN_ROW_FROM_LEFT_PX = 100   # the Outliner's "Sun" row (fifth: Scene Collection,
 SUN_ROW_FROM_TOP_PX = 95     # Collection, default, Camera, Sun), from its top-left corner
 

@@ -110,7 +110,7 @@ def test_addon_enabled_in_blender_3_4(run, tmp_path_factory):
     assert "blender-user" in step["addon_file"] and REPO not in step["addon_file"], \
         step["addon_file"]
     assert "CSM" in step["engines"], step["engines"]
-    assert len(step["sidebar_panels"]) == 7, step["sidebar_panels"]
+    assert len(step["sidebar_panels"]) == 8, step["sidebar_panels"]
 
 
 def test_default_scene_in_csm_rendered_view_with_the_csm_sidebar_tab(run):
@@ -139,15 +139,23 @@ def saturated_blue(pixels):
                   (pixels[..., 2] > pixels[..., 1] + 0.1)).mean())
 
 
+def saturated_red(pixels):
+    return float(((pixels[..., 0] > pixels[..., 1] + 0.15) &
+                  (pixels[..., 0] > pixels[..., 2] + 0.1)).mean())
+
+
 def test_cascade_colours_are_visible(run):
     lit = viewport_pixels(run, run["steps"]["panel"])
     tinted = viewport_pixels(run, run["steps"]["cascades"])
     # Chosen with a click on the sidebar's Debug View dropdown and C; L went back to Lit.
     assert run["steps"]["cascades"]["debug_view"] == 'CASCADES'
     assert run["steps"]["cascades"]["debug_view_after_l"] == 'NONE'
-    # Measured: lit 0%, cascade colours ~10% saturated blue (the third cascade).
+    # The lit landscape has no saturated blue and little red (the towers); the cascade
+    # colours paint the near ground red (the first cascade: Fit to Visible Depth starts it
+    # where the view does) and the far hills blue (the third).
     assert saturated_blue(lit) < 0.01, saturated_blue(lit)
-    assert saturated_blue(tinted) > 0.03, saturated_blue(tinted)
+    gained = saturated_red(tinted) + saturated_blue(tinted) - saturated_red(lit)
+    assert gained > 0.03, (saturated_red(lit), saturated_red(tinted), saturated_blue(tinted))
     assert np.abs(tinted - lit).mean() > 0.03
 
 
