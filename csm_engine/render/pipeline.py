@@ -81,17 +81,25 @@ class _DrawMaterial:
     """One material slot ready to draw: its uniform buffer, its four textures (white where
     there is none, see _MATERIAL_SAMPLERS), alpha and shadow modes, culling, and the key a
     shadow tile records of it."""
-    __slots__ = ("block", "textures", "alpha_mode", "shadow_mode", "backface_culling",
-                 "backface_culling_shadow", "shadow_key")
+    __slots__ = ("block", "textures", "textured", "alpha_mode", "shadow_mode",
+                 "backface_culling", "backface_culling_shadow", "shadow_key")
 
-    def __init__(self, block, textures, alpha_mode, shadow_mode, backface_culling,
+    def __init__(self, block, textures, textured, alpha_mode, shadow_mode, backface_culling,
                  backface_culling_shadow, shadow_key):
-        self.block, self.textures = block, textures
+        self.block, self.textures, self.textured = block, textures, textured
         self.alpha_mode, self.shadow_mode = alpha_mode, shadow_mode
         self.backface_culling = backface_culling
         self.backface_culling_shadow = backface_culling_shadow
         self.shadow_key = shadow_key
 
+
+# The G-buffer's draws in order: (program, slot of the _draw_items entry, whether the mesh
+# has tangents, None: either). NOTE: llvmpipe samples a texture even where the shader's
+# `if` skips it, so materials without images use a program that has no texture reads
+# (about a third of the G-buffer's time here).
+_GBUFFER_PASSES = (("gbuffer_untextured", 5, None), ("gbuffer", 0, False),
+                   ("gbuffer_tangent", 0, True), ("gbuffer_masked", 1, False),
+                   ("gbuffer_masked_tangent", 1, True))
 
 # The lighting program of each Shadow Filter setting (shaders.py builds one per filter).
 LIGHTING_PROGRAMS = {"HARD": "lighting_hard", "PCF": "lighting", "SOFT": "lighting_soft"}
@@ -118,7 +126,7 @@ class Pipeline:
         self.skip_gpu_calls = False   # benchmark only: a frame of Python without the GPU
         self.gbuffer_fb = None      # kept after draw() for the final render's read-back
         self._combined_fb = None    # what holds the final Combined image, when not "final"
-        self.ao_fb = None           # the full-resolution AO of the last frame (None: AO off)
+        self.ao_fb = None           # the half-resolution AO of the last frame (None: AO off)
         self.shadow_tiles = {"drawn": 0, "skipped": 0}   # of the last frame
 
     # -- resources ---------------------------------------------------------------------
@@ -323,19 +331,18 @@ class Pipeline:
                 gpu.state.depth_test_set('LESS_EQUAL')
                 gpu.state.depth_mask_set(True)
                 culling = 'NONE'
-                # Opaque before alpha-tested; meshes with tangents (normal maps) use the
-                # programs that read them.
-                for masked, tangents in ((False, False), (False, True), (True, False),
-                                         (True, True)):
+                # Opaque before alpha-tested; untextured materials with the program that
+                # samples no texture, meshes with tangents (normal maps) with the programs
+                # that read them. (slot in the _draw_items entry, tangents or None: any)
+                for program, slot, tangents in _GBUFFER_PASSES:
                     gbuffer = None
                     for index in order:
                         entry = items[index]
-                        draws = entry[masked]
-                        if not draws or entry[4] != tangents:
+                        draws = entry[slot]
+                        if not draws or (tangents is not None and entry[4] != tangents):
                             continue
                         if gbuffer is None:
-                            gbuffer = library.get("gbuffer" + ("_masked" if masked else "") +
-                                                  ("_tangent" if tangents else ""))
+                            gbuffer = library.get(program)
                             gbuffer.bind()
                             gbuffer.uniform_block("frame", frame_ubo)
                             bound = None
@@ -382,7 +389,8 @@ class Pipeline:
 
         # 3. Lighting (+ debug views) into the target
         lighting = library.get(LIGHTING_PROGRAMS.get(
-            getattr(snap.settings, "shadow_filter", "PCF"), "lighting"))
+            getattr(snap.settings, "shadow_filter", "PCF"), "lighting") +
+            ("_spots" if snap.spots else ""))
 
         def light_pass():
             gpu.state.viewport_set(0, 0, width, height)
@@ -412,10 +420,11 @@ class Pipeline:
         return plan
 
     def _ambient_occlusion(self, snap, frame_ubo, view_depth, normal, width, height):
-        """The AO pass (ao_frag.glsl): the horizon search at half resolution, then the
-        depth-aware blur back to full resolution. Returns the full-resolution AO texture
-        (1 = open, 0 = occluded), or None when AO is off or its strength is 0, in which
-        case no AO texture is allocated and the lighting pass ignores its sampler."""
+        """The AO pass (ao_frag.glsl): the horizon search, then the depth-aware blur, both at
+        half resolution. Returns the blurred texture (AO: 1 = open, 0 = occluded; and the
+        view depth it stands for), which the lighting pass brings to full resolution; or
+        None when AO is off or its strength is 0, in which case no AO texture is allocated
+        and the lighting pass ignores its sampler."""
         import gpu
         self.ao_fb = None
         settings = snap.settings
@@ -423,17 +432,17 @@ class Pipeline:
                 getattr(settings, "ao_strength", 0.0) <= 0.0 or \
                 getattr(settings, "ao_distance", 0.0) <= 0.0:
             return None
-        half = self._texture("ao_half", ((width + 1) // 2, (height + 1) // 2), 'R32F')
-        full = self._texture("ao", (width, height), 'R32F')
-        half_fb = self._framebuffer("ao_half", colors=(half,))
-        full_fb = self._framebuffer("ao", colors=(full,))
+        half_size = ((width + 1) // 2, (height + 1) // 2)
+        search = self._texture("ao_half", half_size, 'R32F')
+        blurred = self._texture("ao", half_size, 'RG32F')
+        search_fb = self._framebuffer("ao_half", colors=(search,))
+        blurred_fb = self._framebuffer("ao", colors=(blurred,))
         library = shaders.LIBRARY
-        for program, fb, size, extra in (
-                ("ao", half_fb, (half.width, half.height), ()),
-                ("ao_blur", full_fb, (width, height), (("ao_half", half),))):
+        for program, fb, extra in (("ao", search_fb, ()),
+                                   ("ao_blur", blurred_fb, (("ao_half", search),))):
             shader = library.get(program)
             with fb.bind():
-                gpu.state.viewport_set(0, 0, *size)
+                gpu.state.viewport_set(0, 0, *half_size)
                 gpu.state.depth_test_set('NONE')
                 gpu.state.depth_mask_set(False)
                 shader.bind()
@@ -443,8 +452,8 @@ class Pipeline:
                 for name, texture in extra:
                     shader.uniform_sampler(name, texture)
                 self._gpu_call(self._fullscreen_batch().draw, shader)
-        self.ao_fb = full_fb
-        return full
+        self.ao_fb = blurred_fb
+        return blurred
 
     def _draw_casters(self, library, items, world_from_objects, tile, visible, mirrored,
                       cull_front):
@@ -524,19 +533,22 @@ class Pipeline:
         return np.nonzero(mask)[0]
 
     def _draw_items(self, snap, cache, white):
-        """Per instance: (camera opaque draws, camera alpha-tested draws, shadow opaque
-        draws, shadow alpha-tested draws, whether the mesh has tangents); each draw is
-        (batch, ``_DrawMaterial``). Instances of one mesh share the lists."""
+        """Per instance: (camera opaque textured draws, camera alpha-tested draws, shadow
+        opaque draws, shadow alpha-tested draws, whether the mesh has tangents, camera
+        opaque untextured draws); each draw is (batch, ``_DrawMaterial``). Instances of one
+        mesh share the lists."""
         per_mesh = {}
         items = []
         for instance in snap.instances:
             entry = per_mesh.get(instance.key)
             if entry is None:
                 mesh = cache.meshes.get(instance.key)
-                entry = ([], [], [], [], bool(mesh is not None and mesh.has_tangents))
+                entry = ([], [], [], [], bool(mesh is not None and mesh.has_tangents), [])
                 for batch, slot in (mesh.batches if mesh is not None else ()):
                     material = self._material(cache, mesh, slot, white)
-                    entry[material.alpha_mode != 'OPAQUE'].append((batch, material))
+                    camera = 1 if material.alpha_mode != 'OPAQUE' else \
+                        (0 if material.textured else 5)
+                    entry[camera].append((batch, material))
                     if material.shadow_mode != 'NONE':
                         entry[2 + (material.shadow_mode != 'OPAQUE')].append(
                             (batch, material))
@@ -581,7 +593,7 @@ class Pipeline:
                       material.backface_culling_shadow)
         if held[2] != 'OPAQUE' and loaded[0]:
             shadow_key = None
-        return _DrawMaterial(held[1], tuple(t or white for t in textures),
+        return _DrawMaterial(held[1], tuple(t or white for t in textures), any(loaded),
                              material.alpha_mode, material.shadow_mode,
                              material.backface_culling, material.backface_culling_shadow,
                              shadow_key)
@@ -767,12 +779,11 @@ class Pipeline:
     # -- read-back for final renders -----------------------------------------------------
     # What each image is read from: (target, colour slot); the G-buffer's normal target is
     # the pipeline's own, the other two the final target's.
-    READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("gbuffer", 1),
-             "ao": ("ao", 0)}
+    READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("gbuffer", 1)}
 
     def render_offscreen(self, snap, cache, reads=None, with_positions=False):
         """Draw into offscreen float targets and read back only what ``reads`` names:
-        image name ("combined", "aux", "normal", "ao") -> channels (1..4, from the first;
+        image name ("combined", "aux", "normal") -> channels (1..4, from the first;
         default: combined and aux, RGBA). Each image is one read into a new buffer that the
         returned (H, W, channels) float32 array views, without another copy. With
         ``with_positions`` the G-buffer's world positions are added as "position" (tests
@@ -802,12 +813,9 @@ class Pipeline:
         out = {}
         for name, channels in reads.items():
             source, slot = self.READS[name]
-            fb = {"final": target, "gbuffer": self.gbuffer_fb, "ao": self.ao_fb}[source]
+            fb = {"final": target, "gbuffer": self.gbuffer_fb}[source]
             if name == "combined":
                 fb, slot = combined_fb or target, 0
-            if fb is None:      # "ao" with AO off: nothing occludes
-                out[name] = np.ones((height, width, channels), dtype=np.float32)
-                continue
             buffer = gpu.types.Buffer('FLOAT', width * height * channels)
             with fb.bind():
                 fb.read_color(0, 0, width, height, channels, slot, 'FLOAT', data=buffer)

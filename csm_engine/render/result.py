@@ -10,7 +10,8 @@ from dataclasses import dataclass, field
 
 # Steps a final render times, in the order they run (seconds). Blender's own work around
 # the engine (depsgraph evaluation, writing the image) is whatever the wall clock adds.
-TIMED_STEPS = ("scene_read", "mesh_upload", "python_setup", "shadow", "gbuffer", "lighting",
+TIMED_STEPS = ("scene_read", "mesh_upload", "python_setup", "shadow", "gbuffer", "depth_range",
+               "ao", "lighting",
                "fxaa", "antialiasing", "readback")
 
 

@@ -114,6 +114,9 @@ PROGRAMS = {
 for _name in ("gbuffer", "shadow"):
     PROGRAMS[_name + "_masked"] = dict(PROGRAMS[_name], defines=(("ALPHA_MASK", "1"),),
                                        material=True)
+# Materials without images: no texture reads at all (llvmpipe pays for a sample behind an
+# `if` that skips it).
+PROGRAMS["gbuffer_untextured"] = dict(PROGRAMS["gbuffer"], defines=(("UNTEXTURED", "1"),))
 # Meshes whose materials use a normal map carry a per-corner tangent (xyz, bitangent sign);
 # only they pay for it, with these variants (NORMAL_MAP) of the G-buffer programs.
 for _name in ("gbuffer", "gbuffer_masked"):
@@ -123,25 +126,32 @@ for _name in ("gbuffer", "gbuffer_masked"):
         interface=_spec["interface"] + (("world_tangent", "VEC4", "smooth"),),
         defines=_spec.get("defines", ()) + (("NORMAL_MAP", "1"),))
 
-# Screen-space ambient occlusion (ao_frag.glsl): the horizon search at half resolution,
-# then a depth-aware blur that brings it back to full resolution; lighting multiplies its
-# ambient term by the result.
+# Screen-space ambient occlusion (ao_frag.glsl): the horizon search and a depth-aware blur,
+# both at half resolution; lighting brings it to full resolution and multiplies its ambient
+# term by the result.
 _AO_COMMON = dict(vertex="fullscreen_vert.glsl", fragment="ao_frag.glsl",
                   inputs=(("pos", "VEC2"),), interface=(("screen_uv", "VEC2", "smooth"),),
-                  push=(), frame=True, outputs=(("FLOAT", "out_ao"),))
+                  push=(), frame=True)
 PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
-                                            ("FLOAT_2D", "gbuffer_normal")))
+                                            ("FLOAT_2D", "gbuffer_normal")),
+                      outputs=(("FLOAT", "out_ao"),))
 PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
                                                  ("FLOAT_2D", "gbuffer_normal"),
                                                  ("FLOAT_2D", "ao_half")),
+                           outputs=(("VEC2", "out_ao_depth"),),
                            defines=(("AO_BLUR", "1"),))
 PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),)
 
 # One lighting program per Shadow Filter setting (SHADOW_FILTER, see common.glsl): the
-# plain "lighting" is PCF.
+# plain "lighting" is PCF. Each has a "_spots" twin with the spot-light loop (SPOT_LIGHTS),
+# used when the scene has spot lights: llvmpipe pays for a loop's first pass even when it
+# runs no times.
 for _filter in ("HARD", "SOFT"):
     PROGRAMS["lighting_" + _filter.lower()] = dict(
         PROGRAMS["lighting"], defines=(("SHADOW_FILTER", f"FILTER_{_filter}"),))
+for _name in ("lighting", "lighting_hard", "lighting_soft"):
+    PROGRAMS[_name + "_spots"] = dict(
+        PROGRAMS[_name], defines=PROGRAMS[_name].get("defines", ()) + (("SPOT_LIGHTS", "1"),))
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
 

@@ -9,11 +9,14 @@
  * pass estimates by ray casting (1 = open sky, 0 = fully occluded). Each half-resolution
  * pixel takes its rotation from a 4x4 pattern, so a 4x4 neighbourhood sees 16 rotations.
  *
- * "ao_blur" (AO_BLUR defined; full resolution): a 4x4 depth-aware gather of the half-
- * resolution result around each full-resolution pixel, which both removes the 4x4 pattern
- * and brings the AO back to full resolution. A neighbour counts only when its surface
- * point lies on the pixel's tangent plane (within a few pixel footprints), so occlusion
- * does not bleed across silhouettes and a grazing plane still blurs along itself.
+ * "ao_blur" (AO_BLUR defined; half resolution too): a 4x4 depth-aware mean of the search's
+ * result, which removes its 4x4 pattern. A neighbour counts only when its surface point
+ * lies on the pixel's tangent plane (within a few pixel footprints), so occlusion does not
+ * bleed across silhouettes and a grazing plane still blurs along itself. The lighting pass
+ * brings it to full resolution (ambient_occlusion_at in lighting_frag.glsl).
+ *
+ * NOTE: the blur ran at full resolution until 2026-11-24: 16 neighbours for each of 4x as
+ * many pixels made it the larger half of the AO's cost on llvmpipe.
  *
  * Inputs: the G-buffer's view depth (0 = background) and world normal. */
 
@@ -153,13 +156,18 @@ void main()
 
 #else /* AO_BLUR */
 
+/* Half resolution: the depth-aware mean of the 4x4 half-resolution neighbourhood, which
+ * holds all 16 rotations of the search's pattern. Written with the view depth it stands
+ * for, so the lighting pass can bring it to full resolution without bleeding across
+ * silhouettes (out_ao_depth: AO, view depth; depth 0 = background). */
 void main()
 {
   ivec2 size = ivec2(frame.viewport_size);
-  ivec2 p = ivec2(gl_FragCoord.xy);
+  ivec2 h0 = ivec2(gl_FragCoord.xy);
+  ivec2 p = min(h0 * 2, size - 1);   /* the full-resolution pixel this one stands for */
   float depth = texelFetch(gbuffer_depth, p, 0).r;
   if (depth <= 0.0) {
-    out_ao = 1.0;
+    out_ao_depth = vec2(1.0, 0.0);
     return;
   }
   vec3 center = ao_view_position(p, depth);
@@ -167,29 +175,23 @@ void main()
   /* Off the tangent plane by more than this (scene units): another surface. */
   float tolerance = 2.0 * ao_pixel_footprint(depth) + 0.02 * frame.ao_distance;
   ivec2 half_size = textureSize(ao_half, 0);
-  ivec2 base = p / 2 - 1;
   float sum = 0.0;
   float weight_sum = 0.0;
   for (int y = 0; y < 4; y++) {
     for (int x = 0; x < 4; x++) {
-      ivec2 h = base + ivec2(x, y);
-      if (any(lessThan(h, ivec2(0))) || any(greaterThanEqual(h, half_size))) {
-        continue;
-      }
+      ivec2 h = clamp(h0 + ivec2(x - 1, y - 1), ivec2(0), half_size - 1);
       ivec2 q = min(h * 2, size - 1);   /* the full-resolution pixel h was computed at */
       float d = texelFetch(gbuffer_depth, q, 0).r;
-      if (d <= 0.0) {
-        continue;
-      }
       float off_plane = abs(dot(ao_view_position(q, d) - center, n));
-      float weight = clamp(1.0 - off_plane / tolerance, 0.0, 1.0);
+      /* Background neighbours (d = 0) count for nothing. */
+      float weight = d > 0.0 ? clamp(1.0 - off_plane / tolerance, 0.0, 1.0) : 0.0;
       sum += weight * texelFetch(ao_half, h, 0).r;
       weight_sum += weight;
     }
   }
-  /* No neighbour on this surface (a sliver): its own half-resolution value. */
-  out_ao = weight_sum > 1e-4 ? sum / weight_sum :
-                               texelFetch(ao_half, clamp(p / 2, ivec2(0), half_size - 1), 0).r;
+  /* No neighbour on this surface (a sliver): its own value. */
+  out_ao_depth = vec2(weight_sum > 1e-4 ? sum / weight_sum : texelFetch(ao_half, h0, 0).r,
+                      depth);
 }
 
 #endif

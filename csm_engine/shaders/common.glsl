@@ -73,6 +73,11 @@ vec2 receiver_depth_per_texel(ShadowTileData tile, vec3 n)
   return length_slope > bound ? slope * (bound / length_slope) : slope;
 }
 
+/* The cross pattern's taps, then the nine-tap pattern's four corners (times the radius). */
+const vec2 PCF_TAP_OFFSETS[9] = vec2[](vec2(0.0, 0.0), vec2(1.0, 0.0), vec2(-1.0, 0.0),
+                                       vec2(0.0, 1.0), vec2(0.0, -1.0), vec2(1.0, 1.0),
+                                       vec2(-1.0, 1.0), vec2(1.0, -1.0), vec2(-1.0, -1.0));
+
 /* NOTE: the filter is chosen when the program is built (SHADOW_FILTER, one program per
  * Shadow Filter setting), not by a uniform: llvmpipe runs the code of a branch not taken
  * as well, so the soft filter's loops in the same program made PCF 2.4x slower. */
@@ -186,13 +191,12 @@ float soft_shadow(ShadowTileData tile, float light_size, vec2 texel, float compa
 }
 #endif
 
-/* Visibility (1 lit, 0 shadowed) of world point p with normal n from shadow tile t.
+/* Visibility (1 lit, 0 shadowed) of world point p with normal n from shadow tile `tile`.
  * light_size: the sun's tan(half angle), or a spot light's radius (scene units); used by
  * the soft filter only. */
-float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l, float light_size)
+float shadow_tile_visibility(ShadowTileData tile, vec3 p, vec3 n, float n_dot_l,
+                             float light_size)
 {
-  ShadowTileData tile = frame.shadow_tiles[t];
-
   float texel_world = tile.texel_world;
   if (tile.is_perspective != 0) {
     /* Perspective: a texel covers more of the world the further it is from the light. */
@@ -228,50 +232,51 @@ float shadow_tile_visibility(int t, vec3 p, vec3 n, float n_dot_l, float light_s
 #elif SHADOW_FILTER == FILTER_HARD
   return shadow_tap(origin, last_texel, texel, texel, compare, depth_per_texel);
 #else
+  /* NOTE: llvmpipe runs both sides of every `if` (masked), so the patterns are loops
+   * whose trip counts come from the settings: the pattern not chosen costs one masked
+   * tap (a loop body always runs once), not its whole set. */
   int radius = int(pcf_radius);
   int pattern = frame.pcf_pattern;
-  if (radius == 0) {
-    return shadow_tap(origin, last_texel, texel, texel, compare, depth_per_texel);
-  }
   float lit = 0.0;
-  float taps = 0.0;
-  if (pattern == PCF_GRID) {
-    /* (2r+1)^2 bilinearly weighted taps, gathered as the (2r+2)^2 texels they touch with
-     * separable weights: the same footprint as hard taps, but edges ramp smoothly instead
-     * of in texel-sized stair steps. */
-    vec2 t = texel - 0.5;
-    vec2 base = floor(t);
-    vec2 f = t - base;
-    int last = 2 * radius + 1;
-    for (int y = 0; y <= last; y++) {
-      float wy = (y == 0) ? 1.0 - f.y : ((y == last) ? f.y : 1.0);
-      for (int x = 0; x <= last; x++) {
-        float wx = (x == 0) ? 1.0 - f.x : ((x == last) ? f.x : 1.0);
-        vec2 center = base + vec2(float(x - radius), float(y - radius)) + 0.5;
-        lit += wx * wy * shadow_tap(origin, last_texel, center, texel, compare, depth_per_texel);
-      }
-    }
-    taps = float(last * last);
-  }
-  else {
-    float r = float(radius);
-    lit = shadow_tap(origin, last_texel, texel, texel, compare, depth_per_texel);
-    lit += shadow_tap(origin, last_texel, texel + vec2(r, 0.0), texel, compare, depth_per_texel);
-    lit += shadow_tap(origin, last_texel, texel + vec2(-r, 0.0), texel, compare, depth_per_texel);
-    lit += shadow_tap(origin, last_texel, texel + vec2(0.0, r), texel, compare, depth_per_texel);
-    lit += shadow_tap(origin, last_texel, texel + vec2(0.0, -r), texel, compare, depth_per_texel);
-    taps = 5.0;
-    if (pattern == PCF_NINE_TAP) {
-      lit += shadow_tap(origin, last_texel, texel + vec2(r, r), texel, compare, depth_per_texel);
-      lit += shadow_tap(origin, last_texel, texel + vec2(-r, r), texel, compare, depth_per_texel);
-      lit += shadow_tap(origin, last_texel, texel + vec2(r, -r), texel, compare, depth_per_texel);
-      lit += shadow_tap(origin, last_texel, texel + vec2(-r, -r), texel, compare,
-                        depth_per_texel);
-      taps = 9.0;
+  /* Grid: (2r+1)^2 bilinearly weighted taps, gathered as the (2r+2)^2 texels they touch
+   * with separable weights: the same footprint as hard taps, but edges ramp smoothly
+   * instead of in texel-sized stair steps. */
+  int last = (pattern == PCF_GRID && radius > 0) ? 2 * radius + 1 : -1;
+  vec2 corner = texel - 0.5;
+  vec2 base = floor(corner);
+  vec2 f = corner - base;
+  for (int y = 0; y <= last; y++) {
+    float wy = (y == 0) ? 1.0 - f.y : ((y == last) ? f.y : 1.0);
+    for (int x = 0; x <= last; x++) {
+      float wx = (x == 0) ? 1.0 - f.x : ((x == last) ? f.x : 1.0);
+      vec2 center = base + vec2(float(x - radius), float(y - radius)) + 0.5;
+      lit += wx * wy * shadow_tap(origin, last_texel, center, texel, compare, depth_per_texel);
     }
   }
-  return lit / taps;
+  /* Cross (5 taps) and nine-tap (3x3) patterns r texels apart; radius 0 is one hard tap. */
+  int taps = radius == 0 ? 1 : (pattern == PCF_CROSS5 ? 5 : (pattern == PCF_NINE_TAP ? 9 : 0));
+  float r = float(radius);
+  for (int k = 0; k < taps; k++) {
+    lit += shadow_tap(origin, last_texel, texel + r * PCF_TAP_OFFSETS[k], texel, compare,
+                      depth_per_texel);
+  }
+  return lit / float(last >= 0 ? (last * last) : taps);
 #endif
+}
+
+/* Sun cascade c's shadow tile (the first for c outside 0..MAX_CASCADES - 1).
+ * NOTE: llvmpipe reads a uniform-array element whose index differs between pixels one
+ * pixel at a time, for each of the tile's ~40 floats; comparing c with each constant index
+ * instead is a few vector selects. */
+ShadowTileData cascade_tile(int c)
+{
+  ShadowTileData tile = frame.shadow_tiles[0];
+  for (int i = 1; i < MAX_CASCADES; i++) {
+    if (c == i) {
+      tile = frame.shadow_tiles[i];
+    }
+  }
+  return tile;
 }
 
 /* Index of the cascade whose slice holds this view depth, or -1 beyond the last. */
@@ -286,26 +291,28 @@ int cascade_index(float view_depth)
   return -1;
 }
 
-/* Sun visibility with cascade blending and distance fade.
- * cascade_out: cascade index, with a fractional part inside a blend band (2.3 = 70% of
- * cascade 2 and 30% of cascade 3), or -1 where nothing is shadowed. */
-float sun_visibility(vec3 p, vec3 n, float n_dot_l, float view_depth, out float cascade_out)
+/* The sun's shadow lookups for a pixel at this view depth: its cascade (-1 beyond the
+ * last) and, inside a blend band, the next cascade's weight (0 elsewhere). The lighting
+ * pass looks up cascade i, then cascade i + 1 where the weight is above 0, and mixes:
+ * sun_shadow_fade() gives the distance fade. */
+int sun_cascade(float view_depth, out float next_weight)
 {
   int i = cascade_index(view_depth);
-  cascade_out = float(i);
-  if (i < 0) {
-    return 1.0;
-  }
-  float vis = shadow_tile_visibility(i, p, n, n_dot_l, frame.sun_tan_half_angle);
-  int count = frame.cascade_count;
-  float split = frame.cascades[i].far_depth;
-  float band = frame.cascades[i].blend_band;
-  if (i + 1 < count && band > 0.0 && view_depth > split - band) {
+  next_weight = 0.0;
+  if (i >= 0 && i + 1 < frame.cascade_count) {
+    float split = frame.cascades[i].far_depth;
+    float band = frame.cascades[i].blend_band;
     /* The next cascade's box was fitted from split - band on, so it covers this point. */
-    float w = clamp((view_depth - (split - band)) / band, 0.0, 1.0);
-    vis = mix(vis, shadow_tile_visibility(i + 1, p, n, n_dot_l, frame.sun_tan_half_angle), w);
-    cascade_out += w;
+    if (band > 0.0) {
+      next_weight = clamp((view_depth - (split - band)) / band, 0.0, 1.0);
+    }
   }
+  return i;
+}
+
+/* Shadow visibility v faded out towards the Shadow Distance. */
+float sun_shadow_fade(float vis, float view_depth)
+{
   float fade_start = frame.fade_start_depth;
   float distance = frame.shadow_distance;
   if (distance > fade_start && view_depth > fade_start) {

@@ -29,9 +29,11 @@ float roughness_shininess(float roughness)
 void main()
 {
   vec4 base = material.base_color;
+#ifndef UNTEXTURED
   if (material.has_base_texture != 0) {
     base *= texture(base_color_texture, tex_coord);
   }
+#endif
 #ifdef ALPHA_MASK
   /* Only this variant may discard: see shaders.py on early depth tests. CLIP cuts out below
    * the cutoff (Sponza's foliage); HASHED keeps a pixel when alpha beats the hash. */
@@ -64,7 +66,13 @@ void main()
   float shininess;
   float specular;
   bool has_surface = material.roughness_channel >= 0 || material.metallic_channel >= 0;
+#ifdef UNTEXTURED
+  /* UNTEXTURED: the variant for materials without images (roughness_channel and
+   * metallic_channel are -1 then). */
+  vec4 surface = vec4(0.0);
+#else
   vec4 surface = has_surface ? texture(surface_texture, tex_coord) : vec4(0.0);
+#endif
   if (has_surface && material.surface_convention == SURFACE_COURSE) {
     /* The course's files: shininess / 256 in green (0.01 where green is 0), specular
      * level in blue; no metal (docs/materials.md). */
@@ -87,9 +95,11 @@ void main()
     specular = level * smooth_part * smooth_part;
   }
   vec3 emission = material.emission;
+#ifndef UNTEXTURED
   if (material.has_emission_texture != 0) {
     emission *= texture(emission_texture, tex_coord).rgb;
   }
+#endif
   out_albedo = vec4(base.rgb, specular);
   out_normal = vec4(n, shininess);
   out_depth = max(view_depth, 1e-6);

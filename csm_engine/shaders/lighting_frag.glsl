@@ -39,6 +39,33 @@ vec3 world_position_at(vec2 uv, float view_depth)
   return mix(near_point, far_point, (view_depth - near_depth) / (far_depth - near_depth));
 }
 
+/* The AO at full-resolution pixel px, from the four half-resolution values around it (each
+ * computed at full-resolution pixel 2h, and holding that pixel's view depth): bilinear
+ * weights, times how well each one's depth fits this surface (its depth here plus the
+ * screen-space slope; 0 where the slope is unknown), so AO neither bleeds across
+ * silhouettes nor blurs a crease away. */
+float ambient_occlusion_at(ivec2 px, float depth, vec2 depth_slope)
+{
+  ivec2 last = textureSize(ambient_occlusion, 0) - 1;
+  ivec2 base = px / 2;
+  vec2 f = vec2(px - base * 2) * 0.5;
+  float tolerance = 0.02 * depth + 2.0 * (abs(depth_slope.x) + abs(depth_slope.y));
+  float sum = 0.0;
+  float weight_sum = 0.0;
+  for (int y = 0; y < 2; y++) {
+    for (int x = 0; x < 2; x++) {
+      ivec2 h = min(base + ivec2(x, y), last);
+      vec2 ao_depth = texelFetch(ambient_occlusion, h, 0).rg;
+      float expected = depth + dot(depth_slope, vec2(h * 2 - px));
+      float bilinear = (x == 0 ? 1.0 - f.x : f.x) * (y == 0 ? 1.0 - f.y : f.y);
+      float weight = bilinear * clamp(1.0 - abs(ao_depth.g - expected) / tolerance, 0.0, 1.0);
+      sum += weight * ao_depth.r;
+      weight_sum += weight;
+    }
+  }
+  return weight_sum > 1e-6 ? sum / weight_sum : texelFetch(ambient_occlusion, min(base, last), 0).r;
+}
+
 void main()
 {
   vec2 pixel = screen_uv * frame.viewport_size;
@@ -84,7 +111,10 @@ void main()
    * point_lights 0.18% with the shading normal only, 0.12% with this. */
   vec3 shadow_normal = n;
   vec3 facet = cross(dFdx(p), dFdy(p));
-  float depth_step = max(abs(dFdx(depth)), abs(dFdy(depth)));
+  vec2 depth_derivatives = vec2(dFdx(depth), dFdy(depth));
+  float depth_step = max(abs(depth_derivatives.x), abs(depth_derivatives.y));
+  /* View depth change per pixel along this surface; unknown (0) across a depth jump. */
+  vec2 depth_slope = depth_step < 0.05 * depth ? depth_derivatives : vec2(0.0);
   if (dot(facet, facet) > 1e-20 && depth_step < 0.05 * depth) {
     facet = normalize(facet);
     vec3 towards_camera = frame.is_perspective != 0 ? frame.camera_position - p :
@@ -106,29 +136,38 @@ void main()
   vec3 color = frame.ambient_color * albedo;
   /* Ambient occlusion darkens only this term, as in EEVEE: direct light has its shadows. */
   float ambient_visibility = frame.ao_enabled != 0 ?
-      mix(1.0, texelFetch(ambient_occlusion, px, 0).r, frame.ao_strength) : 1.0;
+      mix(1.0, ambient_occlusion_at(px, depth, depth_slope), frame.ao_strength) : 1.0;
   color *= ambient_visibility;
 
-  float sun_vis = 1.0;
-  float cascade = -1.0;
+  /* The sun's cascade, and the next one's weight inside a blend band. */
+  bool sun_shadowed = frame.has_sun != 0 && frame.sun_casts_shadow != 0;
+  vec3 sun_l = normalize(frame.sun_direction);
+  float sun_n_dot_l = dot(n, sun_l);
+  float next_weight;
+  int sun_tile = sun_cascade(view_depth, next_weight);
+  float cascade = sun_shadowed ? float(sun_tile) : -1.0;
+  /* Facing away from the sun: in its own shadow, whatever the map says (and no taps to
+   * pay for). */
+  float sun_vis = (sun_shadowed && sun_n_dot_l <= 0.0) ? 0.0 : 1.0;
+  int sun_lookups = (sun_shadowed && sun_tile >= 0 && sun_n_dot_l > 0.0) ?
+                    (next_weight > 0.0 ? 2 : 1) : 0;
+
+  /* NOTE: llvmpipe runs both sides of an `if` (and one pass of any loop) for every pixel,
+   * but leaves a loop once no pixel of its group needs another pass: in this loop a pixel
+   * pays for the next cascade's lookup only where some pixel near it is in a blend band. */
+  float shadow_n_dot_sun = dot(shadow_normal, sun_l);
+  for (int k = 0; k < sun_lookups; k++) {
+    float vis = shadow_tile_visibility(cascade_tile(sun_tile + k), p, shadow_normal,
+                                       shadow_n_dot_sun, frame.sun_tan_half_angle);
+    sun_vis = k == 0 ? vis : mix(sun_vis, vis, next_weight);
+  }
+  if (sun_lookups > 0) {
+    cascade += sun_lookups == 2 ? next_weight : 0.0;
+    sun_vis = sun_shadow_fade(sun_vis, view_depth);
+  }
   if (frame.has_sun != 0) {
-    vec3 l = normalize(frame.sun_direction);
-    float n_dot_l = dot(n, l);
-    if (frame.sun_casts_shadow != 0) {
-      if (n_dot_l > 0.0) {
-        sun_vis = sun_visibility(p, shadow_normal, dot(shadow_normal, l), view_depth,
-                                 cascade);
-      }
-      else {
-        /* Facing away from the sun: in its own shadow, whatever the map says (and no taps
-         * to pay for). The cascade index is still reported for the debug views. */
-        sun_vis = 0.0;
-        int c = cascade_index(view_depth);
-        cascade = float(c);
-      }
-    }
     color += frame.sun_color *
-             surface_brdf(albedo, metallic, specular, shininess, n, l, to_camera) * sun_vis;
+             surface_brdf(albedo, metallic, specular, shininess, n, sun_l, to_camera) * sun_vis;
   }
 
   int point_count = frame.point_light_count;
@@ -146,6 +185,9 @@ void main()
     }
   }
 
+#ifdef SPOT_LIGHTS
+  /* Only the program for scenes with spot lights has this loop: llvmpipe would run one
+   * pass of it, shadow lookup included, for every pixel of every scene. */
   int spot_count = frame.spot_light_count;
   for (int i = 0; i < MAX_SPOT_LIGHTS; i++) {
     if (i >= spot_count) {
@@ -160,13 +202,14 @@ void main()
     if (attenuation > 0.0) {
       float vis = 1.0;
       if (spot.shadow_tile >= 0) {
-        vis = shadow_tile_visibility(spot.shadow_tile, p, shadow_normal,
+        vis = shadow_tile_visibility(frame.shadow_tiles[spot.shadow_tile], p, shadow_normal,
                                      dot(shadow_normal, l), spot.source_radius);
       }
       color += spot.color * attenuation * vis *
                surface_brdf(albedo, metallic, specular, shininess, n, l, to_camera);
     }
   }
+#endif
 
   /* Emission (EEVEE's units: radiance added as is): shows in full shadow and without any
    * light, and no light or ambient term scales it. */
