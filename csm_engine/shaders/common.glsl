@@ -264,21 +264,6 @@ float shadow_tile_visibility(ShadowTileData tile, vec3 p, vec3 n, float n_dot_l,
 #endif
 }
 
-/* Sun cascade c's shadow tile (the first for c outside 0..MAX_CASCADES - 1).
- * NOTE: llvmpipe reads a uniform-array element whose index differs between pixels one
- * pixel at a time, for each of the tile's ~40 floats; comparing c with each constant index
- * instead is a few vector selects. */
-ShadowTileData cascade_tile(int c)
-{
-  ShadowTileData tile = frame.shadow_tiles[0];
-  for (int i = 1; i < MAX_CASCADES; i++) {
-    if (c == i) {
-      tile = frame.shadow_tiles[i];
-    }
-  }
-  return tile;
-}
-
 /* Index of the cascade whose slice holds this view depth, or -1 beyond the last. */
 int cascade_index(float view_depth)
 {

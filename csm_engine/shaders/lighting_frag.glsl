@@ -157,7 +157,7 @@ void main()
    * pays for the next cascade's lookup only where some pixel near it is in a blend band. */
   float shadow_n_dot_sun = dot(shadow_normal, sun_l);
   for (int k = 0; k < sun_lookups; k++) {
-    float vis = shadow_tile_visibility(cascade_tile(sun_tile + k), p, shadow_normal,
+    float vis = shadow_tile_visibility(frame.shadow_tiles[sun_tile + k], p, shadow_normal,
                                        shadow_n_dot_sun, frame.sun_tan_half_angle);
     sun_vis = k == 0 ? vis : mix(sun_vis, vis, next_weight);
   }
