@@ -74,7 +74,7 @@ vec2 receiver_depth_per_texel(ShadowTileData tile, vec3 n)
 }
 
 /* The cross pattern's taps, then the nine-tap pattern's four corners (times the radius). */
-const vec2 PCF_TAP_OFFSETS[9] = vec2[](vec2(0.0, 0.0), vec2(1.0, 0.0), vec2(-1.0, 0.0),
+const vec2 TAP_PATTERN_OFFSETS[9] = vec2[](vec2(0.0, 0.0), vec2(1.0, 0.0), vec2(-1.0, 0.0),
                                        vec2(0.0, 1.0), vec2(0.0, -1.0), vec2(1.0, 1.0),
                                        vec2(-1.0, 1.0), vec2(1.0, -1.0), vec2(-1.0, -1.0));
 
@@ -257,7 +257,7 @@ float shadow_tile_visibility(ShadowTileData tile, vec3 p, vec3 n, float n_dot_l,
   int taps = radius == 0 ? 1 : (pattern == PCF_CROSS5 ? 5 : (pattern == PCF_NINE_TAP ? 9 : 0));
   float r = float(radius);
   for (int k = 0; k < taps; k++) {
-    lit += shadow_tap(origin, last_texel, texel + r * PCF_TAP_OFFSETS[k], texel, compare,
+    lit += shadow_tap(origin, last_texel, texel + r * TAP_PATTERN_OFFSETS[k], texel, compare,
                       depth_per_texel);
   }
   return lit / float(last >= 0 ? (last * last) : taps);

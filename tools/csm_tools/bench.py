@@ -557,11 +557,12 @@ def markdown_tables(results):
                 f"| EEVEE (1 sample) | {len(animation['eevee']['frames_s'])} | "
                 f"{ms(animation['eevee']['median_s'])} |",
                 "", f"EEVEE / CSM per animation frame: **{animation['ratio']:.1f}x**."]
-    keys = ("scene_read", "mesh_upload", "python_setup", "shadow", "gbuffer", "lighting",
-            "readback", "blender", "wall")
+    keys = ("scene_read", "mesh_upload", "python_setup", "shadow", "gbuffer", "depth_range",
+            "ao", "lighting", "fxaa", "readback", "blender", "wall")
     out += ["", "### Where CSM's frame goes (one profiled render, ms)", "",
             "| scene | scene read | mesh extraction + upload | planning (Python) | shadow "
-            "passes | G-buffer | lighting | read-back | Blender | wall |",
+            "passes | G-buffer | visible depth (SDSM) | AO | lighting | FXAA | read-back | "
+            "Blender | wall |",
             "|---|" + "---:|" * len(keys)]
     for s in results["scenes"]:
         split = s["csm_split_s"]
