@@ -105,6 +105,17 @@ _GBUFFER_PASSES = (("gbuffer_untextured", 5, None), ("gbuffer", 0, False),
 LIGHTING_PROGRAMS = {"HARD": "lighting_hard", "PCF": "lighting", "SOFT": "lighting_soft"}
 
 
+def lighting_program(snap):
+    """The lighting program for this frame: its Shadow Filter's, with the spot-light loop
+    only when the scene has spot lights and the debug views only when one is shown
+    (shaders.py: llvmpipe pays for code a frame does not use)."""
+    settings = snap.settings
+    debug = getattr(settings, "debug_view", "NONE") != "NONE" or \
+        bool(getattr(settings, "debug_inset", False))
+    return (LIGHTING_PROGRAMS.get(getattr(settings, "shadow_filter", "PCF"), "lighting") +
+            ("_spots" if snap.spots else "") + ("_debug" if debug else ""))
+
+
 class RenderTargetError(Exception):
     """A render target or shadow map could not be allocated; the message says which and
     how large."""
@@ -388,9 +399,7 @@ class Pipeline:
             t = self._sync(self.ao_fb, "ao", t)
 
         # 3. Lighting (+ debug views) into the target
-        lighting = library.get(LIGHTING_PROGRAMS.get(
-            getattr(snap.settings, "shadow_filter", "PCF"), "lighting") +
-            ("_spots" if snap.spots else ""))
+        lighting = library.get(lighting_program(snap))
 
         def light_pass():
             gpu.state.viewport_set(0, 0, width, height)

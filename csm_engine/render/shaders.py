@@ -149,9 +149,15 @@ PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),)
 for _filter in ("HARD", "SOFT"):
     PROGRAMS["lighting_" + _filter.lower()] = dict(
         PROGRAMS["lighting"], defines=(("SHADOW_FILTER", f"FILTER_{_filter}"),))
+# And each of those a "_debug" twin with the debug views (WITH_DEBUG_VIEWS), for the same
+# reason: the lit image does not pay for the views' code.
 for _name in ("lighting", "lighting_hard", "lighting_soft"):
     PROGRAMS[_name + "_spots"] = dict(
         PROGRAMS[_name], defines=PROGRAMS[_name].get("defines", ()) + (("SPOT_LIGHTS", "1"),))
+for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
+    PROGRAMS[_name + "_debug"] = dict(
+        PROGRAMS[_name],
+        defines=PROGRAMS[_name].get("defines", ()) + (("WITH_DEBUG_VIEWS", "1"),))
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
 

@@ -78,6 +78,7 @@ void main()
   bool inset = frame.debug_inset != 0;
   int shadow_tile_count = frame.cascade_count + frame.spot_light_count;
 
+#ifdef WITH_DEBUG_VIEWS
   if (debug_view == DEBUG_SHADOW_MAP || inset) {
     vec2 uv;
     int t = clamp(frame.debug_shadow_map, 0, max(shadow_tile_count - 1, 0));
@@ -92,6 +93,7 @@ void main()
       return;
     }
   }
+#endif
 
   if (depth <= 0.0) {
     /* Background: the World colour; alpha 0 with Film > Transparent. */
@@ -215,6 +217,7 @@ void main()
    * light, and no light or ambient term scales it. */
   color += emission_metallic.rgb;
 
+#ifdef WITH_DEBUG_VIEWS
   if (debug_view == DEBUG_CASCADES) {
     /* Hue from the cascade, brightness from the lit image: readable on any albedo (a plain
      * multiply turns green grass under the blue cascade black). */
@@ -256,6 +259,8 @@ void main()
   else if (debug_view == DEBUG_SPECULAR) {
     color = vec3(specular, shininess / 256.0, metallic);
   }
+
+#endif
 
   out_color = vec4(color, 1.0);
   out_aux = vec4(sun_vis, cascade, view_depth, 1.0);
