@@ -106,14 +106,16 @@ LIGHTING_PROGRAMS = {"HARD": "lighting_hard", "PCF": "lighting", "SOFT": "lighti
 
 
 def lighting_program(snap):
-    """The lighting program for this frame: its Shadow Filter's, with the spot-light loop
-    only when the scene has spot lights and the debug views only when one is shown
+    """The lighting program for this frame: its Shadow Filter's, with the point- and
+    spot-light loops only when the scene has such lights and the debug views only when one
+    is shown
     (shaders.py: llvmpipe pays for code a frame does not use)."""
     settings = snap.settings
     debug = getattr(settings, "debug_view", "NONE") != "NONE" or \
         bool(getattr(settings, "debug_inset", False))
     return (LIGHTING_PROGRAMS.get(getattr(settings, "shadow_filter", "PCF"), "lighting") +
-            ("_spots" if snap.spots else "") + ("_debug" if debug else ""))
+            ("_points" if snap.points else "") + ("_spots" if snap.spots else "") +
+            ("_debug" if debug else ""))
 
 
 class RenderTargetError(Exception):

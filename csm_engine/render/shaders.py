@@ -143,17 +143,18 @@ PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
 PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),)
 
 # One lighting program per Shadow Filter setting (SHADOW_FILTER, see common.glsl): the
-# plain "lighting" is PCF. Each has a "_spots" twin with the spot-light loop (SPOT_LIGHTS),
-# used when the scene has spot lights: llvmpipe pays for a loop's first pass even when it
-# runs no times.
+# plain "lighting" is PCF. Each has "_points" and "_spots" twins with the point- and
+# spot-light loops (POINT_LIGHTS, SPOT_LIGHTS), used when the scene has such lights:
+# llvmpipe pays for a loop's first pass even when it runs no times.
 for _filter in ("HARD", "SOFT"):
     PROGRAMS["lighting_" + _filter.lower()] = dict(
         PROGRAMS["lighting"], defines=(("SHADOW_FILTER", f"FILTER_{_filter}"),))
 # And each of those a "_debug" twin with the debug views (WITH_DEBUG_VIEWS), for the same
 # reason: the lit image does not pay for the views' code.
-for _name in ("lighting", "lighting_hard", "lighting_soft"):
-    PROGRAMS[_name + "_spots"] = dict(
-        PROGRAMS[_name], defines=PROGRAMS[_name].get("defines", ()) + (("SPOT_LIGHTS", "1"),))
+for _feature, _define in (("_points", "POINT_LIGHTS"), ("_spots", "SPOT_LIGHTS")):
+    for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
+        PROGRAMS[_name + _feature] = dict(
+            PROGRAMS[_name], defines=PROGRAMS[_name].get("defines", ()) + ((_define, "1"),))
 for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
     PROGRAMS[_name + "_debug"] = dict(
         PROGRAMS[_name],

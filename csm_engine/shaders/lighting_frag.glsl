@@ -172,6 +172,8 @@ void main()
              surface_brdf(albedo, metallic, specular, shininess, n, sun_l, to_camera) * sun_vis;
   }
 
+#ifdef POINT_LIGHTS
+  /* Only the programs for scenes with point lights have this loop (see SPOT_LIGHTS). */
   int point_count = frame.point_light_count;
   for (int i = 0; i < MAX_POINT_LIGHTS; i++) {
     if (i >= point_count) {
@@ -186,6 +188,7 @@ void main()
                                                         n, to_light / max(d, 1e-6), to_camera);
     }
   }
+#endif
 
 #ifdef SPOT_LIGHTS
   /* Only the program for scenes with spot lights has this loop: llvmpipe would run one
