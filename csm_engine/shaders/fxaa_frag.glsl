@@ -86,15 +86,20 @@ void main()
   float distance_1 = 0.0, distance_2 = 0.0;
   float end_1 = 0.0, end_2 = 0.0;
   bool done_1 = false, done_2 = false;
-  for (int i = 0; i < EDGE_STEPS; i++) {
+  /* NOTE: a loop with a constant trip count is unrolled by the compiler, and llvmpipe then
+   * runs every step for every pixel (the rest of an `if` is not skipped); a count the
+   * compiler cannot see stays a loop, which ends once no pixel of the group still walks
+   * (FXAA on the default scene at 1280x720: ~105 to ~57 ms of CPU). */
+  int steps = EDGE_STEPS + min(source_size.x, 0);
+  for (int i = 0; i < steps; i++) {
     if (!done_1) {
-      distance_1 += STEP_SIZES[i];
+      distance_1 += STEP_SIZES[min(i, EDGE_STEPS - 1)];
       ivec2 q = p - along * int(distance_1);
       end_1 = 0.5 * (luma_at(q) + luma_at(q + across)) - local_average;
       done_1 = abs(end_1) >= gradient_scaled;
     }
     if (!done_2) {
-      distance_2 += STEP_SIZES[i];
+      distance_2 += STEP_SIZES[min(i, EDGE_STEPS - 1)];
       ivec2 q = p + along * int(distance_2);
       end_2 = 0.5 * (luma_at(q) + luma_at(q + across)) - local_average;
       done_2 = abs(end_2) >= gradient_scaled;
