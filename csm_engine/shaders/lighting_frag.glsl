@@ -159,8 +159,12 @@ void main()
    * pays for the next cascade's lookup only where some pixel near it is in a blend band. */
   float shadow_n_dot_sun = dot(shadow_normal, sun_l);
   for (int k = 0; k < sun_lookups; k++) {
-    float vis = shadow_tile_visibility(frame.shadow_tiles[sun_tile + k], p, shadow_normal,
-                                       shadow_n_dot_sun, frame.sun_tan_half_angle);
+    ShadowTileData tile = frame.shadow_tiles[sun_tile + k];
+    /* Sun cascades are orthographic: said here as a constant, the compiler drops the
+     * perspective code from the lookup (llvmpipe would run it for every pixel). */
+    tile.is_perspective = 0;
+    float vis = shadow_tile_visibility(tile, p, shadow_normal, shadow_n_dot_sun,
+                                       frame.sun_tan_half_angle);
     sun_vis = k == 0 ? vis : mix(sun_vis, vis, next_weight);
   }
   if (sun_lookups > 0) {
