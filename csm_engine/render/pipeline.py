@@ -81,12 +81,13 @@ class _DrawMaterial:
     """One material slot ready to draw: its uniform buffer, its four textures (white where
     there is none, see _MATERIAL_SAMPLERS), alpha and shadow modes, culling, and the key a
     shadow tile records of it."""
-    __slots__ = ("block", "textures", "textured", "alpha_mode", "shadow_mode",
-                 "backface_culling", "backface_culling_shadow", "shadow_key")
+    __slots__ = ("block", "textures", "textured", "writes_emission", "alpha_mode",
+                 "shadow_mode", "backface_culling", "backface_culling_shadow", "shadow_key")
 
-    def __init__(self, block, textures, textured, alpha_mode, shadow_mode, backface_culling,
-                 backface_culling_shadow, shadow_key):
+    def __init__(self, block, textures, textured, writes_emission, alpha_mode, shadow_mode,
+                 backface_culling, backface_culling_shadow, shadow_key):
         self.block, self.textures, self.textured = block, textures, textured
+        self.writes_emission = writes_emission
         self.alpha_mode, self.shadow_mode = alpha_mode, shadow_mode
         self.backface_culling = backface_culling
         self.backface_culling_shadow = backface_culling_shadow
@@ -118,6 +119,22 @@ def lighting_program(snap):
             ("_debug" if debug else ""))
 
 
+def _writes_emission(items):
+    """Whether any camera draw of ``items`` (see Pipeline._draw_items) has emission or
+    metallic, i.e. needs the G-buffer's emission target. Instances of one mesh share their
+    entry, so each entry is looked at once."""
+    seen = set()
+    for entry in items:
+        if id(entry) in seen:
+            continue
+        seen.add(id(entry))
+        for draws in (entry[0], entry[1], entry[5]):
+            for _batch, material in draws:
+                if material.writes_emission:
+                    return True
+    return False
+
+
 class RenderTargetError(Exception):
     """A render target or shadow map could not be allocated; the message says which and
     how large."""
@@ -140,6 +157,7 @@ class Pipeline:
         self.gbuffer_fb = None      # kept after draw() for the final render's read-back
         self._combined_fb = None    # what holds the final Combined image, when not "final"
         self.ao_fb = None           # the half-resolution AO of the last frame (None: AO off)
+        self._zeroed_emission = None   # the emission texture last cleared to zero
         self.shadow_tiles = {"drawn": 0, "skipped": 0}   # of the last frame
 
     # -- resources ---------------------------------------------------------------------
@@ -333,8 +351,21 @@ class Pipeline:
             view_depth = self._texture("view_depth", (width, height), 'R32F')
             depth = self._texture("depth", (width, height), 'DEPTH_COMPONENT32F')
             emission = self._texture("emission", (width, height), 'RGBA16F')
-            gbuffer_fb = self._framebuffer("gbuffer", depth=depth,
-                                           colors=(albedo, normal, view_depth, emission))
+            # Emission and metallic have a target only in frames that draw some: without
+            # it each fragment writes a sixth less (llvmpipe: ~15 % of the G-buffer), and
+            # the lighting pass reads an emission texture kept at zero.
+            if _writes_emission(items):
+                gbuffer_fb = self._framebuffer("gbuffer", depth=depth,
+                                               colors=(albedo, normal, view_depth, emission))
+                self._zeroed_emission = None
+            else:
+                gbuffer_fb = self._framebuffer("gbuffer_no_emission", depth=depth,
+                                               colors=(albedo, normal, view_depth))
+                if self._zeroed_emission is not emission:
+                    emission_fb = self._framebuffer("emission_only", colors=(emission,))
+                    with emission_fb.bind():
+                        self._gpu_call(emission_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
+                    self._zeroed_emission = emission
             # Near to far, so the early depth test skips the shading of hidden fragments.
             order = np.asarray(front_to_back(snap, bounds_lo_hi), dtype=np.int64)
             order = order[np.array([i.visible_camera for i in snap.instances], dtype=bool)[order]]
@@ -604,8 +635,11 @@ class Pipeline:
                       material.backface_culling_shadow)
         if held[2] != 'OPAQUE' and loaded[0]:
             shadow_key = None
+        writes_emission = bool(loaded[2] or max(material.emission) > 0.0 or
+                               material.metallic > 0.0 or
+                               (loaded[3] and material.metallic_channel >= 0))
         return _DrawMaterial(held[1], tuple(t or white for t in textures), any(loaded),
-                             material.alpha_mode, material.shadow_mode,
+                             writes_emission, material.alpha_mode, material.shadow_mode,
                              material.backface_culling, material.backface_culling_shadow,
                              shadow_key)
 

@@ -237,6 +237,25 @@ def test_emission_shows_without_lights_and_in_full_shadow(empty_scene):
     assert np.allclose(shadowed["combined"][30, 30, :3], (2.0, 1.0, 0.5), atol=2e-3)
 
 
+def test_emission_switched_off_leaves_no_glow_behind(empty_scene):
+    """Frames without emission or metal draw no emission target (the pipeline keeps its
+    texture at zero): after the glowing material's strength goes to 0, the next render of
+    the same size shows the plain, unlit black plane, not the last frame's glow."""
+    scene = empty_scene
+    set_world_color(scene, (0.0, 0.0, 0.0))
+    glowing, _ = principled_material(
+        "glow", base=(0.5, 0.5, 0.5), **{"Emission Color|Emission": (1.0, 0.5, 0.25, 1.0),
+                                          "Emission Strength": 2.0})
+    add_plane(2.0, (0, 0, 0), glowing)
+    top_camera(scene, ortho_scale=6.0)
+    assert render_scene(scene, 120, 60)["combined"][30, 60, 0] > 1.9
+    glowing.node_tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 0.0
+    dark = render_scene(scene, 120, 60)["combined"]
+    assert np.abs(dark[30, 60, :3]).max() < 1e-3, dark[30, 60]
+    glowing.node_tree.nodes["Principled BSDF"].inputs["Emission Strength"].default_value = 2.0
+    assert render_scene(scene, 120, 60)["combined"][30, 60, 0] > 1.9
+
+
 # ---- metallic and specular ---------------------------------------------------------------
 
 def _metal_and_plastic(scene, sun_direction):
