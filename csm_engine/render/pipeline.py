@@ -475,7 +475,7 @@ class Pipeline:
                 getattr(settings, "ao_distance", 0.0) <= 0.0:
             return None
         half_size = ((width + 1) // 2, (height + 1) // 2)
-        search = self._texture("ao_half", half_size, 'R32F')
+        search = self._texture("ao_half", half_size, 'RG32F')
         blurred = self._texture("ao", half_size, 'RG32F')
         search_fb = self._framebuffer("ao_half", colors=(search,))
         blurred_fb = self._framebuffer("ao", colors=(blurred,))
@@ -489,7 +489,8 @@ class Pipeline:
                 gpu.state.depth_mask_set(False)
                 shader.bind()
                 shader.uniform_block("frame", frame_ubo)
-                shader.uniform_sampler("gbuffer_depth", view_depth)
+                if program == "ao":
+                    shader.uniform_sampler("gbuffer_depth", view_depth)
                 shader.uniform_sampler("gbuffer_normal", normal)
                 for name, texture in extra:
                     shader.uniform_sampler(name, texture)

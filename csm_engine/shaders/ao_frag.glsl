@@ -18,7 +18,9 @@
  * NOTE: the blur ran at full resolution until 2026-11-24: 16 neighbours for each of 4x as
  * many pixels made it the larger half of the AO's cost on llvmpipe.
  *
- * Inputs: the G-buffer's view depth (0 = background) and world normal. */
+ * Inputs: the G-buffer's view depth (0 = background) and world normal. Both programs
+ * write (AO, the view depth of the full-resolution pixel the value stands for), so the
+ * blur and the lighting pass read one texel where they would read two. */
 
 #define AO_PI 3.14159265358979
 #define AO_HALF_PI 1.57079632679490
@@ -98,12 +100,12 @@ void main()
   ivec2 p = min(ao_pixel * 2, size - 1);
   float depth = texelFetch(gbuffer_depth, p, 0).r;
   if (depth <= 0.0) {
-    out_ao = 1.0;
+    out_ao_depth = vec2(1.0, 0.0);
     return;
   }
   float radius_px = frame.ao_distance / ao_pixel_footprint(depth);
   if (radius_px < 1.5) {
-    out_ao = 1.0;   /* everything within the distance is inside this pixel */
+    out_ao_depth = vec2(1.0, depth);   /* everything within the distance is inside this pixel */
     return;
   }
   radius_px = min(radius_px, AO_MAX_RADIUS);
@@ -151,7 +153,7 @@ void main()
     /* The same with both horizons on the tangent plane (h = angle_n +- pi/2). */
     open_sky += n_proj_len * (cos_n + angle_n * sin_n);
   }
-  out_ao = open_sky > 1e-6 ? clamp(visibility / open_sky, 0.0, 1.0) : 1.0;
+  out_ao_depth = vec2(open_sky > 1e-6 ? clamp(visibility / open_sky, 0.0, 1.0) : 1.0, depth);
 }
 
 #else /* AO_BLUR */
@@ -165,7 +167,9 @@ void main()
   ivec2 size = ivec2(frame.viewport_size);
   ivec2 h0 = ivec2(gl_FragCoord.xy);
   ivec2 p = min(h0 * 2, size - 1);   /* the full-resolution pixel this one stands for */
-  float depth = texelFetch(gbuffer_depth, p, 0).r;
+  /* The search wrote each value with the view depth of the pixel it stands for. */
+  vec2 own = texelFetch(ao_half, h0, 0).rg;
+  float depth = own.g;
   if (depth <= 0.0) {
     out_ao_depth = vec2(1.0, 0.0);
     return;
@@ -180,18 +184,17 @@ void main()
   for (int y = 0; y < 4; y++) {
     for (int x = 0; x < 4; x++) {
       ivec2 h = clamp(h0 + ivec2(x - 1, y - 1), ivec2(0), half_size - 1);
+      vec2 ao_depth = texelFetch(ao_half, h, 0).rg;
       ivec2 q = min(h * 2, size - 1);   /* the full-resolution pixel h was computed at */
-      float d = texelFetch(gbuffer_depth, q, 0).r;
-      float off_plane = abs(dot(ao_view_position(q, d) - center, n));
-      /* Background neighbours (d = 0) count for nothing. */
-      float weight = d > 0.0 ? clamp(1.0 - off_plane / tolerance, 0.0, 1.0) : 0.0;
-      sum += weight * texelFetch(ao_half, h, 0).r;
+      float off_plane = abs(dot(ao_view_position(q, ao_depth.g) - center, n));
+      /* Background neighbours (depth 0) count for nothing. */
+      float weight = ao_depth.g > 0.0 ? clamp(1.0 - off_plane / tolerance, 0.0, 1.0) : 0.0;
+      sum += weight * ao_depth.r;
       weight_sum += weight;
     }
   }
   /* No neighbour on this surface (a sliver): its own value. */
-  out_ao_depth = vec2(weight_sum > 1e-4 ? sum / weight_sum : texelFetch(ao_half, h0, 0).r,
-                      depth);
+  out_ao_depth = vec2(weight_sum > 1e-4 ? sum / weight_sum : own.r, depth);
 }
 
 #endif
