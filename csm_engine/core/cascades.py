@@ -87,10 +87,13 @@ def _bounds(name, bounds):
     return low, high
 
 
+# Corner i of a box takes the high side on axis a when bit a of i is set.
+_CORNER_PICK = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=bool)
+
+
 def _box_corners(low, high):
     """The 8 corners of an axis-aligned box, (8, 3)."""
-    pick = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=bool)
-    return np.where(pick, high, low)
+    return np.where(_CORNER_PICK, high, low)
 
 
 def _transform_points(matrix, points):
@@ -268,6 +271,11 @@ def light_view_matrix(light_dir_world, up_hint=None):
     it, so the shadow grid never flips.
     """
     forward = vector3("light direction", light_dir_world)
+    key = (forward.tobytes(), None if up_hint is None else
+           np.asarray(up_hint, dtype=np.float64).tobytes())
+    held = _LIGHT_VIEWS.get(key)
+    if held is not None:
+        return held.copy()
     length = np.linalg.norm(forward)
     if not length > 1e-12:
         raise ValueError(f"light direction must not be zero, got {forward.tolist()}")
@@ -286,15 +294,34 @@ def light_view_matrix(light_dir_world, up_hint=None):
     light_from_world = np.eye(4)
     light_from_world[0, :3], light_from_world[1, :3], light_from_world[2, :3] = \
         x_axis, y_axis, z_axis
+    if len(_LIGHT_VIEWS) >= _LIGHT_VIEWS_MAX:
+        _LIGHT_VIEWS.clear()
+    _LIGHT_VIEWS[key] = light_from_world.copy()
     return light_from_world
+
+
+# (light direction, up hint) as bytes -> light_from_world: the sun rarely turns between
+# viewport redraws, and the two cross products cost more than the rest of a cascade.
+_LIGHT_VIEWS = {}
+_LIGHT_VIEWS_MAX = 64
+
+
+_IDENTITY3 = np.eye(3)
+_BOTTOM_ROW = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def _close(a, b, atol):
+    """``np.allclose(a, b, atol=atol)`` (rtol 1e-5) for finite arrays, without its
+    per-call overhead (~25 us; this runs once per cascade per frame)."""
+    return bool((np.abs(a - b) <= atol + 1e-5 * np.abs(b)).all())
 
 
 def _check_rotation(light_from_world_rot):
     m = matrix4("light_from_world rotation", light_from_world_rot)
     rotation = m[:3, :3]
-    if not (np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-6)
-            and np.linalg.det(rotation) > 0.0 and np.allclose(m[:3, 3], 0.0, atol=1e-9)
-            and np.allclose(m[3], (0.0, 0.0, 0.0, 1.0))):
+    if not (_close(rotation @ rotation.T, _IDENTITY3, 1e-6)
+            and np.linalg.det(rotation) > 0.0 and _close(m[:3, 3], 0.0, 1e-9)
+            and _close(m[3], _BOTTOM_ROW, 1e-8)):
         raise ValueError("light_from_world rotation must be a pure rotation "
                          "(orthonormal, determinant +1, no translation); "
                          "build it with light_view_matrix()")
@@ -549,9 +576,7 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
 
     The far plane is the slice's far side: receivers only exist inside the slice.
     """
-    corners = np.asarray(slice_corners_world, dtype=np.float64)
-    if corners.shape != (8, 3) or not np.all(np.isfinite(corners)):
-        raise ValueError(f"slice corners must be 8 finite 3D points, got shape {corners.shape}")
+    corners = _slice_corners(slice_corners_world)
     rotation = _check_rotation(light_from_world_rot)
     resolution = _resolution("cascade resolution", resolution)
     if resolution < 2:
@@ -559,15 +584,33 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
     margin = finite("occluder margin", occluder_margin)
     if margin < 0.0:
         raise ValueError(f"occluder margin must not be negative, got {margin}")
+    if stabilize and bounding_sphere_world is not None:
+        bounding_sphere_world = (vector3("bounding sphere centre", bounding_sphere_world[0]),
+                                 finite("bounding sphere radius", bounding_sphere_world[1]))
+    scene_box = None if scene_bounds is None else _bounds("scene bounds", scene_bounds)
+    return _fit_checked(corners, rotation, resolution, stabilize, margin, scene_box,
+                        bounding_sphere_world, receiver_box)
 
+
+def _slice_corners(slice_corners_world):
+    corners = np.asarray(slice_corners_world, dtype=np.float64)
+    if corners.shape != (8, 3) or not np.isfinite(corners).all():
+        raise ValueError(f"slice corners must be 8 finite 3D points, got shape {corners.shape}")
+    return corners
+
+
+def _fit_checked(corners, rotation, resolution, stabilize, margin, scene_box,
+                 bounding_sphere_world, receiver_box):
+    """``fit_cascade`` on checked inputs: (8, 3) corners, a 3x3 rotation, an int
+    resolution, a float margin, the scene's (low, high) or None, a (centre, radius) sphere
+    or None. ``compute_cascades`` checks its inputs once per frame and calls this per
+    cascade (the checks cost as much as the fit)."""
     # Rotated light frame ("rot"): light axes, world origin. Depth along the light is -z.
-    corners_rot = corners @ rotation.T
     if stabilize:
         if bounding_sphere_world is None:
             centre_world, radius = bounding_sphere(corners)
         else:
-            centre_world = vector3("bounding sphere centre", bounding_sphere_world[0])
-            radius = finite("bounding sphere radius", bounding_sphere_world[1])
+            centre_world, radius = bounding_sphere_world
         radius = round_up_radius(max(radius, 1e-9))
         depth_radius = radius
         radius_xy = np.array([radius, radius])
@@ -607,6 +650,7 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
         texel_xy = texel
         sphere_centre = centre_world
     else:
+        corners_rot = corners @ rotation.T
         low_xy, high_xy = corners_rot[:, :2].min(axis=0), corners_rot[:, :2].max(axis=0)
         # A slice seen edge-on by the light is flat in one axis; keep the box non-empty.
         spread = max(float(np.max(high_xy - low_xy)), 1e-9)
@@ -619,9 +663,8 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
         sphere_centre, radius = None, math.nan
 
     near_depth = nearest_depth - margin
-    if scene_bounds is not None:
-        low, high = _bounds("scene bounds", scene_bounds)
-        scene_rot_z = _box_corners(low, high) @ rotation[2]
+    if scene_box is not None:
+        scene_rot_z = _box_corners(*scene_box) @ rotation[2]
         near_depth = min(near_depth, float(-scene_rot_z.max()))
     if not farthest_depth > near_depth:
         farthest_depth = near_depth + 1e-6 * max(1.0, abs(near_depth))
@@ -729,6 +772,15 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
     rotation = light_view_matrix(light_dir, up_hint)
     if occluder_margin is None:
         occluder_margin = default_occluder_margin(scene_bounds)
+    # Checked once here rather than per cascade in fit_cascade (a viewport redraw runs this
+    # for every camera move). light_view_matrix builds a pure rotation by construction.
+    margin = finite("occluder margin", occluder_margin)
+    if margin < 0.0:
+        raise ValueError(f"occluder margin must not be negative, got {margin}")
+    scene_box = None if scene_bounds is None else _bounds("scene bounds", scene_bounds)
+    if min(resolutions) < 2:
+        raise ValueError(f"cascade resolution must be at least 2 texels, "
+                         f"got {min(resolutions)}")
 
     bands = blend_band_widths(splits, blend_band)
     cascades = []
@@ -749,9 +801,8 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
                 index < len(previous_squares) else None
             square = receiver_square(world_from_view, projection, depth_blocks, slice_near,
                                      splits[index + 1], rotation, previous)
-        fit = fit_cascade(corners, rotation, resolution, stabilize=stabilize,
-                          occluder_margin=occluder_margin, scene_bounds=scene_bounds,
-                          bounding_sphere_world=sphere, receiver_box=square)
+        fit = _fit_checked(_slice_corners(corners), rotation[:3, :3], resolution,
+                           stabilize, margin, scene_box, sphere, square)
         fit.receiver_rectangle = square
         fit.split_near, fit.split_far = float(splits[index]), float(splits[index + 1])
         cascades.append(fit)
