@@ -198,6 +198,24 @@ def plan_shadows(snap, bounds, depth_blocks=None):
                       warnings)
 
 
+def gbuffer_plan(snap, bounds):
+    """The plan a Fit to Visible Depth frame draws its G-buffer with, before the visible
+    depths are known. The G-buffer passes read only the camera (and the sample index) from
+    the frame block, so no cascades are fitted for it: the real plan follows from the
+    G-buffer's depths (``plan_shadows`` with ``depth_blocks``).
+
+    NOTE: on the first frame of Freeze Cascades the plain plan is made here, as it always
+    was: it is the one that stays frozen."""
+    s = snap.settings
+    if s.freeze_cascades and snap.scene_name not in _FROZEN:
+        return plan_shadows(snap, bounds)
+    camera = snap.camera
+    distance = s.shadow_distance if s.shadow_distance > 0 else camera.clip_end
+    distance = float(min(max(distance, camera.clip_start * 1.001), camera.clip_end))
+    return ShadowPlan([], 0, np.array([camera.clip_start, distance]), np.zeros(MAX_CASCADES),
+                      distance, {}, None, [])
+
+
 def layout_atlas(tiles):
     """Shelf-pack square tiles into one atlas; returns (width, height) in texels."""
     x = y = row_height = width = 0
@@ -221,10 +239,24 @@ def window_normal_from_world(tile):
     out = np.zeros((4, 4))
     if tile.is_perspective:
         return out
-    linear = (WINDOW_FROM_CLIP @ np.asarray(tile.clip_from_world, dtype=np.float64))[:3, :3]
+    clip_from_world = np.asarray(tile.clip_from_world, dtype=np.float64)
+    key = clip_from_world.tobytes()
+    held = _WINDOW_NORMALS.get(key)
+    if held is not None:
+        return held.copy()
+    linear = (WINDOW_FROM_CLIP @ clip_from_world)[:3, :3]
     out[:3, :3] = np.linalg.inv(linear).T
     out[3, 3] = 1.0
+    if len(_WINDOW_NORMALS) >= _WINDOW_NORMALS_MAX:
+        _WINDOW_NORMALS.clear()
+    _WINDOW_NORMALS[key] = out.copy()
     return out
+
+
+# clip_from_world bytes -> window_normal_from_world: a stabilized cascade keeps its matrix
+# over many viewport redraws, and the inverse is a third of packing a frame.
+_WINDOW_NORMALS = {}
+_WINDOW_NORMALS_MAX = 64
 
 
 def sun_tan_half_angle(sun):
@@ -236,13 +268,16 @@ def sun_tan_half_angle(sun):
     return math.tan(0.5 * angle)
 
 
-def ambient_occlusion_fields(snap):
+def ambient_occlusion_fields(snap, clip_from_world=None):
     """The frame block's ``ao_*`` fields: the AO settings, and what ao_frag.glsl needs to
-    turn a pixel and its view depth into a view-space point and a distance into pixels."""
+    turn a pixel and its view depth into a view-space point and a distance into pixels.
+    ``clip_from_world``: the camera's, when the caller has it already."""
     s = snap.settings
     camera = snap.camera
     enabled = bool(getattr(s, "ambient_occlusion", False))
-    clip_from_view = np.asarray(camera.clip_from_world, dtype=np.float64) @ \
+    if clip_from_world is None:
+        clip_from_world = camera.clip_from_world
+    clip_from_view = np.asarray(clip_from_world, dtype=np.float64) @ \
         np.asarray(camera.world_from_view, dtype=np.float64)
     p = clip_from_view
     if camera.is_perspective:
@@ -291,10 +326,11 @@ def pack_frame(snap, plan):
                               cos_outer=cos_outer, cos_inner=cos_inner,
                               falloff=LIGHT_FALLOFF_INDEX[spot.falloff],
                               source_radius=spot.source_radius))
+    clip_from_world = camera.clip_from_world      # an inverse each time it is asked for
     return FRAME_LAYOUT.pack(dict(
-        clip_from_world=camera.clip_from_world,
+        clip_from_world=clip_from_world,
         view_from_world=np.linalg.inv(camera.world_from_view),
-        world_from_clip=np.linalg.inv(camera.clip_from_world),
+        world_from_clip=np.linalg.inv(clip_from_world),
         camera_position=camera.position,
         is_perspective=int(bool(camera.is_perspective)),
         camera_forward=camera.forward,
@@ -323,7 +359,7 @@ def pack_frame(snap, plan):
         debug_inset=int(bool(s.debug_inset)),
         cascades=cascade_rows,
         shadow_tiles=tile_rows,
-        **ambient_occlusion_fields(snap),
+        **ambient_occlusion_fields(snap, clip_from_world),
         point_lights=point_rows,
         spot_lights=spot_rows,
     ))

@@ -27,7 +27,7 @@ import numpy as np
 from ..core import cascades
 from ..core.camera import world_positions
 from ..core.shadow_plan import (CASCADE_LINE_COLORS, depth_blocks_from_reduction,
-                                front_to_back, instance_bounds,
+                                front_to_back, gbuffer_plan, instance_bounds,
                                 layout_atlas, pack_frame, plan_shadows)
 from ..core.material_layout import pack_material
 from . import shaders
@@ -225,11 +225,11 @@ class Pipeline:
         bounds = None if bounds_lo_hi is None else \
             (bounds_lo_hi[0].min(axis=0), bounds_lo_hi[1].max(axis=0))
         # Fit to Visible Depth needs the G-buffer's depths before it can plan; the frame
-        # block it draws the G-buffer with needs a plan: the plain one (the G-buffer reads
-        # only the camera from it).
+        # block it draws the G-buffer with needs a plan: one without cascades (the G-buffer
+        # reads only the camera from it).
         fit_to_visible = plan is None and bool(getattr(snap.settings, "fit_to_visible", False))
         if plan is None:
-            plan = plan_shadows(snap, bounds)
+            plan = gbuffer_plan(snap, bounds) if fit_to_visible else plan_shadows(snap, bounds)
         self.warnings.extend(w for w in snap.warnings + plan.warnings if w not in self.warnings)
         atlas = None if fit_to_visible else self._atlas(plan)
         frame_data = pack_frame(snap, plan)
