@@ -882,16 +882,34 @@ def visible_depth_range(nearest, farthest, previous=None, steps_per_octave=8,
     return (low, high)
 
 
-def aabbs_in_cascade(aabb_min_world, aabb_max_world, cascade):
+def aabbs_in_cascade(aabb_min_world, aabb_max_world, cascade, checked=False):
     """Which of N world AABBs may cast into the cascade: (N, 3), (N, 3) -> (N,) bool.
 
     Conservative: each box is taken to light space as the AABB of its 8 transformed corners
     (computed exactly as centre + |rotation| * half-extent), and it is kept when that
     overlaps the shadow box in x and y and its nearest-to-light point is not beyond the far
     plane. Anything between the light and the box stays: it can shadow the slice.
+    ``checked``: the boxes are known to be finite float64 (N, 3) pairs with min <= max
+    (``boxes_are_valid``), so they are not checked again for every cascade.
     """
     low = np.asarray(aabb_min_world, dtype=np.float64)
     high = np.asarray(aabb_max_world, dtype=np.float64)
+    if not checked:
+        _check_boxes(low, high)
+    return _boxes_in_cascade(low, high, cascade)
+
+
+def boxes_are_valid(aabb_min_world, aabb_max_world):
+    """Whether (N, 3) mins and maxs are what ``aabbs_in_cascade`` accepts."""
+    try:
+        _check_boxes(np.asarray(aabb_min_world, dtype=np.float64),
+                     np.asarray(aabb_max_world, dtype=np.float64))
+    except ValueError:
+        return False
+    return True
+
+
+def _check_boxes(low, high):
     if low.ndim != 2 or low.shape[1] != 3 or low.shape != high.shape:
         raise ValueError(f"AABB mins and maxs must both be (N, 3), got {low.shape} "
                          f"and {high.shape}")
@@ -901,6 +919,9 @@ def aabbs_in_cascade(aabb_min_world, aabb_max_world, cascade):
         index = int(np.flatnonzero(bad)[0])
         raise ValueError(f"AABB {index} is not a box: min {low[index].tolist()}, "
                          f"max {high[index].tolist()}")
+
+
+def _boxes_in_cascade(low, high, cascade):
     matrix = cascade.light_from_world
     centre = _transform_points(matrix, 0.5 * (low + high))
     extent = 0.5 * (high - low) @ np.abs(matrix[:3, :3]).T

@@ -293,6 +293,28 @@ def ambient_occlusion_fields(snap, clip_from_world=None):
                 ao_view_ray=view_ray)
 
 
+# The last camera packed: (its matrices as bytes, (clip_from_world, view_from_world,
+# world_from_clip)). A Fit to Visible Depth frame packs its camera twice.
+_LAST_CAMERA = [None, None]
+
+
+def _camera_matrices(camera):
+    """clip_from_world, view_from_world and world_from_clip of ``camera`` (three 4x4
+    inverses, so the last camera's are kept)."""
+    world_from_view = np.asarray(camera.world_from_view, dtype=np.float64)
+    clip_from_view = getattr(camera, "clip_from_view", None)    # a CameraView's
+    key = None if clip_from_view is None else \
+        world_from_view.tobytes() + np.asarray(clip_from_view, dtype=np.float64).tobytes()
+    if key is None or _LAST_CAMERA[0] != key:
+        clip_from_world = camera.clip_from_world
+        matrices = (clip_from_world, np.linalg.inv(world_from_view),
+                    np.linalg.inv(clip_from_world))
+        for matrix in matrices:
+            matrix.setflags(write=False)
+        _LAST_CAMERA[:] = [key, matrices]
+    return _LAST_CAMERA[1]
+
+
 def pack_frame(snap, plan):
     """The frame uniform block for this frame (std140 float32 array, ``FRAME_LAYOUT``)."""
     s = snap.settings
@@ -326,11 +348,11 @@ def pack_frame(snap, plan):
                               cos_outer=cos_outer, cos_inner=cos_inner,
                               falloff=LIGHT_FALLOFF_INDEX[spot.falloff],
                               source_radius=spot.source_radius))
-    clip_from_world = camera.clip_from_world      # an inverse each time it is asked for
+    clip_from_world, view_from_world, world_from_clip = _camera_matrices(camera)
     return FRAME_LAYOUT.pack(dict(
         clip_from_world=clip_from_world,
-        view_from_world=np.linalg.inv(camera.world_from_view),
-        world_from_clip=np.linalg.inv(clip_from_world),
+        view_from_world=view_from_world,
+        world_from_clip=world_from_clip,
         camera_position=camera.position,
         is_perspective=int(bool(camera.is_perspective)),
         camera_forward=camera.forward,
