@@ -277,7 +277,7 @@ class Pipeline:
         # Once per frame: each instance's batches, opaque and alpha-masked apart, with
         # their material inputs, and its matrix; the passes below only index into these.
         white = self._white_texture()
-        items = self._draw_items(snap, cache, white)
+        items = self._kept_draw_items(snap, cache, white)
         world_from_objects = instances.world_from_objects
         world_from_objects_gl = instances.world_from_objects_gl
         mirrored = instances.mirrored
@@ -584,46 +584,50 @@ class Pipeline:
                                          checked=checked)
         return np.nonzero(mask)[0]
 
+    def _kept_draw_items(self, snap, cache, white):
+        """``_draw_items``, kept from the last frame while it would come out the same: the
+        same meshes (a re-upload is a new GPUMesh), the same MaterialInfo lists (a material
+        edit makes new ones, see MeshCache.sync) and, for every image, the same GPU texture
+        (an edited image's texture is dropped from the cache)."""
+        keys = tuple(instance.key for instance in snap.instances)
+        held = getattr(self, "_held_draws", None)
+        if held is not None and held[0] == keys and held[1] is white and \
+                all(cache.meshes.get(key) is mesh and
+                    (mesh is None or mesh.materials is materials)
+                    for key, mesh, materials in held[2]) and _same_textures(cache, held[3]):
+            return held[4]
+        items = self._draw_items(snap, cache, white)
+        meshes = [(key, cache.meshes.get(key)) for key in dict.fromkeys(keys)]
+        textures = tuple((image, cache.textures.get(image.name))
+                         for _key, mesh in meshes if mesh is not None
+                         for info in mesh.materials
+                         for image in (info.image, info.normal_image, info.emission_image,
+                                       info.surface_image)
+                         if image is not None)
+        self._held_draws = (keys, white, [(key, mesh, mesh.materials if mesh is not None
+                                           else None) for key, mesh in meshes],
+                            textures, items)
+        return items
+
     def _draw_items(self, snap, cache, white):
         """Per instance: (camera opaque draws, camera alpha-tested draws, shadow opaque
         draws, shadow alpha-tested draws, whether the mesh has tangents); each draw is
         (batch, ``_DrawMaterial``). Instances of one mesh share the lists."""
         per_mesh = {}
         items = []
-        # NOTE: a mesh's lists are kept from the last frame while they would come out the
-        # same: the same GPUMesh (a re-upload is a new one), the same MaterialInfo list (a
-        # material edit makes a new one, see MeshCache.sync), and for every image the same
-        # GPU texture (an edited image's texture is dropped from the cache).
-        held = getattr(self, "_held_draws", {})
-        kept = {}
         for instance in snap.instances:
             entry = per_mesh.get(instance.key)
             if entry is None:
                 mesh = cache.meshes.get(instance.key)
-                known = held.get(instance.key)
-                if known is not None and known[0] is mesh and known[3] is white and \
-                        (mesh is None or known[1] is mesh.materials) and \
-                        _same_textures(cache, known[2]):
-                    entry = known[4]
-                else:
-                    entry = ([], [], [], [], bool(mesh is not None and mesh.has_tangents))
-                    for batch, slot in (mesh.batches if mesh is not None else ()):
-                        material = self._material(cache, mesh, slot, white)
-                        entry[material.alpha_mode != 'OPAQUE'].append((batch, material))
-                        if material.shadow_mode != 'NONE':
-                            entry[2 + (material.shadow_mode != 'OPAQUE')].append(
-                                (batch, material))
-                    textures = tuple((image, cache.textures.get(image.name))
-                                     for info in (mesh.materials if mesh is not None else ())
-                                     for image in (info.image, info.normal_image,
-                                                   info.emission_image, info.surface_image)
-                                     if image is not None)
-                    known = (mesh, mesh.materials if mesh is not None else None, textures,
-                             white, entry)
+                entry = ([], [], [], [], bool(mesh is not None and mesh.has_tangents))
+                for batch, slot in (mesh.batches if mesh is not None else ()):
+                    material = self._material(cache, mesh, slot, white)
+                    entry[material.alpha_mode != 'OPAQUE'].append((batch, material))
+                    if material.shadow_mode != 'NONE':
+                        entry[2 + (material.shadow_mode != 'OPAQUE')].append(
+                            (batch, material))
                 per_mesh[instance.key] = entry
-                kept[instance.key] = known
             items.append(entry)
-        self._held_draws = kept
         return items
 
     def _material(self, cache, mesh, slot, white):
