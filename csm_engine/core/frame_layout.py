@@ -94,6 +94,9 @@ class Field:
         self.name, self.kind, self.count, self.doc = name, kind, count, doc
         self.offset = offset      # bytes from the start of the enclosing struct
         self.stride = stride      # bytes from one array element to the next (std140)
+        # One number (True: an int, False: a float), else None: written directly by write.
+        self.single = None if isinstance(kind, UniformLayout) or _BASIC[kind][0] != 1 \
+            else _BASIC[kind][3] is np.int32
 
     @property
     def is_struct(self):
@@ -215,9 +218,26 @@ class UniformLayout:
 
     def write(self, data, values, base=0):
         """Write ``values`` into ``data`` with this struct starting at byte ``base``."""
+        ints = None
         for name, value in values.items():
-            field = self.field(name)
+            field = self._by_name.get(name) or self.field(name)
             if field.count is None:
+                single = field.single
+                if single is not None and isinstance(value, _NUMBERS):
+                    # NOTE: most of a frame block is single numbers; written here without
+                    # the array round trip of _write_one (a viewport redraw packs a frame
+                    # or two). Same checks, same float32 rounding.
+                    number = float(value)
+                    if single:
+                        if number != round(number):
+                            raise ValueError(f"{self.type_name}.{name}: int field given "
+                                             f"{value!r}")
+                        if ints is None:
+                            ints = data.view(np.int32)
+                        ints[(base + field.offset) // 4] = int(number)
+                    else:
+                        data[(base + field.offset) // 4] = number
+                    continue
                 self._write_one(data, field, base + field.offset, value)
                 continue
             items = list(value)
@@ -235,12 +255,9 @@ class UniformLayout:
             field.kind.write(data, value, at)
             return
         components, _, _, dtype = _BASIC[field.kind]
-        if components == 1 and isinstance(value, _NUMBERS):
-            # NOTE: most of a frame block is single numbers; writing them without the
-            # array round trip below keeps a viewport redraw's packing to ~0.1 ms. Same
-            # checks and the same float32 rounding as the general path.
+        if field.single is not None and isinstance(value, _NUMBERS):
             number = float(value)
-            if dtype is np.int32:
+            if field.single:
                 if number != round(number):
                     raise ValueError(f"{self.type_name}.{field.name}: int field given "
                                      f"{value!r}")
