@@ -587,8 +587,9 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
     if stabilize and bounding_sphere_world is not None:
         bounding_sphere_world = (vector3("bounding sphere centre", bounding_sphere_world[0]),
                                  finite("bounding sphere radius", bounding_sphere_world[1]))
-    scene_box = None if scene_bounds is None else _bounds("scene bounds", scene_bounds)
-    return _fit_checked(corners, rotation, resolution, stabilize, margin, scene_box,
+    scene_near = None if scene_bounds is None else \
+        _scene_near_depth(_bounds("scene bounds", scene_bounds), rotation)
+    return _fit_checked(corners, rotation, resolution, stabilize, margin, scene_near,
                         bounding_sphere_world, receiver_box)
 
 
@@ -599,12 +600,18 @@ def _slice_corners(slice_corners_world):
     return corners
 
 
-def _fit_checked(corners, rotation, resolution, stabilize, margin, scene_box,
+def _scene_near_depth(scene_box, rotation):
+    """Depth along the light (rotated light frame) of the scene box's corner nearest the
+    light: the near plane reaches at least there, so no caster is clipped."""
+    return float(-(_box_corners(*scene_box) @ rotation[2]).max())
+
+
+def _fit_checked(corners, rotation, resolution, stabilize, margin, scene_near,
                  bounding_sphere_world, receiver_box):
     """``fit_cascade`` on checked inputs: (8, 3) corners, a 3x3 rotation, an int
-    resolution, a float margin, the scene's (low, high) or None, a (centre, radius) sphere
-    or None. ``compute_cascades`` checks its inputs once per frame and calls this per
-    cascade (the checks cost as much as the fit)."""
+    resolution, a float margin, the scene's ``_scene_near_depth`` or None, a (centre,
+    radius) sphere or None. ``compute_cascades`` checks its inputs once per frame and calls
+    this per cascade (the checks cost as much as the fit)."""
     # Rotated light frame ("rot"): light axes, world origin. Depth along the light is -z.
     if stabilize:
         if bounding_sphere_world is None:
@@ -663,9 +670,8 @@ def _fit_checked(corners, rotation, resolution, stabilize, margin, scene_box,
         sphere_centre, radius = None, math.nan
 
     near_depth = nearest_depth - margin
-    if scene_box is not None:
-        scene_rot_z = _box_corners(*scene_box) @ rotation[2]
-        near_depth = min(near_depth, float(-scene_rot_z.max()))
+    if scene_near is not None:
+        near_depth = min(near_depth, scene_near)
     if not farthest_depth > near_depth:
         farthest_depth = near_depth + 1e-6 * max(1.0, abs(near_depth))
 
@@ -770,14 +776,17 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
     splits = split_distances(first, last, count, scheme, lam=lam, manual=manual)
     resolutions = cascade_resolutions(len(splits) - 1, base_resolution, equal_resolution)
     rotation = light_view_matrix(light_dir, up_hint)
+    scene_box = None if scene_bounds is None else _bounds("scene bounds", scene_bounds)
     if occluder_margin is None:
-        occluder_margin = default_occluder_margin(scene_bounds)
+        occluder_margin = 0.0 if scene_box is None else \
+            float(np.linalg.norm(scene_box[1] - scene_box[0]))    # default_occluder_margin
     # Checked once here rather than per cascade in fit_cascade (a viewport redraw runs this
     # for every camera move). light_view_matrix builds a pure rotation by construction.
     margin = finite("occluder margin", occluder_margin)
     if margin < 0.0:
         raise ValueError(f"occluder margin must not be negative, got {margin}")
-    scene_box = None if scene_bounds is None else _bounds("scene bounds", scene_bounds)
+    scene_near = None if scene_box is None else \
+        _scene_near_depth(scene_box, rotation[:3, :3])
     if min(resolutions) < 2:
         raise ValueError(f"cascade resolution must be at least 2 texels, "
                          f"got {min(resolutions)}")
@@ -802,7 +811,7 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
             square = receiver_square(world_from_view, projection, depth_blocks, slice_near,
                                      splits[index + 1], rotation, previous)
         fit = _fit_checked(_slice_corners(corners), rotation[:3, :3], resolution,
-                           stabilize, margin, scene_box, sphere, square)
+                           stabilize, margin, scene_near, sphere, square)
         fit.receiver_rectangle = square
         fit.split_near, fit.split_far = float(splits[index]), float(splits[index + 1])
         cascades.append(fit)
