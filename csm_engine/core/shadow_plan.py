@@ -315,13 +315,30 @@ def _camera_matrices(camera):
     return _LAST_CAMERA[1]
 
 
-def pack_frame(snap, plan):
-    """The frame uniform block for this frame (std140 float32 array, ``FRAME_LAYOUT``)."""
+def pack_frame(snap, plan, like=None):
+    """The frame uniform block for this frame (std140 float32 array, ``FRAME_LAYOUT``).
+    ``like``: a block packed by this function for the same, unchanged ``snap`` with another
+    plan (a Fit to Visible Depth frame packs twice): it is copied and only what depends on
+    the plan is written again."""
+    plan_values = _plan_fields(snap, plan)
+    if like is None:
+        return FRAME_LAYOUT.pack({**_snapshot_fields(snap), **plan_values})
+    data = like.copy()
+    for name in _PLAN_ARRAYS:       # rows the other plan used and this one may not
+        field = FRAME_LAYOUT.field(name)
+        data[field.offset // 4:(field.offset + field.count * field.stride) // 4] = 0.0
+    FRAME_LAYOUT.write(data, plan_values)
+    return data
+
+
+# The frame block's arrays that depend on the plan (spot lights: their shadow tile).
+_PLAN_ARRAYS = ("cascades", "shadow_tiles", "spot_lights")
+
+
+def _plan_fields(snap, plan):
+    """The frame block's fields that depend on the shadow plan."""
     s = snap.settings
-    camera = snap.camera
-    points = snap.points[:MAX_POINT_LIGHTS]
     spots = snap.spots[:MAX_SPOT_LIGHTS]
-    sun = snap.sun
     fade_start = plan.shadow_distance * (1.0 - s.fade_fraction) if s.fade_out \
         else plan.shadow_distance * 2.0
     count = plan.cascade_count
@@ -337,9 +354,6 @@ def pack_frame(snap, plan):
                       is_perspective=int(tile.is_perspective), display_near=tile.display_near,
                       window_normal_from_world=window_normal_from_world(tile))
                  for tile in plan.tiles]
-    point_rows = [dict(position=light.position, radius=light.radius, color=light.color,
-                       falloff=LIGHT_FALLOFF_INDEX[light.falloff])
-                  for light in points]
     spot_rows = []
     for i, spot in enumerate(spots):
         cos_outer, cos_inner = spot_cone_cosines(spot)
@@ -348,8 +362,30 @@ def pack_frame(snap, plan):
                               cos_outer=cos_outer, cos_inner=cos_inner,
                               falloff=LIGHT_FALLOFF_INDEX[spot.falloff],
                               source_radius=spot.source_radius))
+    return dict(
+        sun_casts_shadow=int(snap.sun is not None and count > 0),
+        cascade_count=count,
+        shadow_distance=plan.shadow_distance,
+        fade_start_depth=fade_start,
+        cascades=cascade_rows,
+        shadow_tiles=tile_rows,
+        spot_lights=spot_rows,
+    )
+
+
+def _snapshot_fields(snap):
+    """The frame block's fields that depend only on the snapshot (camera, lights,
+    settings)."""
+    s = snap.settings
+    camera = snap.camera
+    points = snap.points[:MAX_POINT_LIGHTS]
+    spots = snap.spots[:MAX_SPOT_LIGHTS]
+    sun = snap.sun
+    point_rows = [dict(position=light.position, radius=light.radius, color=light.color,
+                       falloff=LIGHT_FALLOFF_INDEX[light.falloff])
+                  for light in points]
     clip_from_world, view_from_world, world_from_clip = _camera_matrices(camera)
-    return FRAME_LAYOUT.pack(dict(
+    return dict(
         clip_from_world=clip_from_world,
         view_from_world=view_from_world,
         world_from_clip=world_from_clip,
@@ -363,10 +399,6 @@ def pack_frame(snap, plan):
         sun_direction=sun.to_light if sun is not None else (0.0, 0.0, 0.0),
         has_sun=int(sun is not None),
         sun_color=sun.color if sun is not None else (0.0, 0.0, 0.0),
-        sun_casts_shadow=int(sun is not None and count > 0),
-        cascade_count=count,
-        shadow_distance=plan.shadow_distance,
-        fade_start_depth=fade_start,
         pcf_radius_texels=s.pcf_radius,
         pcf_pattern=PCF_PATTERN_INDEX[s.pcf_pattern],
         depth_bias_texels=s.depth_bias,
@@ -379,12 +411,9 @@ def pack_frame(snap, plan):
         debug_view=DEBUG_VIEW_INDEX[s.debug_view],
         debug_shadow_map=s.debug_shadow_map,
         debug_inset=int(bool(s.debug_inset)),
-        cascades=cascade_rows,
-        shadow_tiles=tile_rows,
         **ambient_occlusion_fields(snap, clip_from_world),
         point_lights=point_rows,
-        spot_lights=spot_rows,
-    ))
+    )
 
 
 def front_to_back(snap, bounds_lo_hi):

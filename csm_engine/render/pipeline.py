@@ -402,7 +402,7 @@ class Pipeline:
             plan = plan_shadows(snap, bounds, blocks)
             self.warnings.extend(w for w in plan.warnings if w not in self.warnings)
             atlas = self._atlas(plan)
-            frame_ubo = self._frame_ubo(pack_frame(snap, plan))
+            frame_ubo = self._frame_ubo(pack_frame(snap, plan, like=frame_data))
             t = shadow_pass(t)
         else:
             t = shadow_pass(t)
