@@ -400,6 +400,24 @@ def _view_space_sphere(view_corners):
     return sphere
 
 
+# (projection, near depth, far depth) -> the slice's view-space corners and, once asked
+# for, their bounding sphere: the same for every redraw that only moves the camera.
+_VIEW_SLICES = {}
+
+
+def _view_slice(projection, near_d, far_d, with_sphere):
+    key = (projection, float(near_d), float(far_d))
+    held = _VIEW_SLICES.get(key)
+    if held is None or (with_sphere and held[1] is None):
+        corners = view_slice_corners(projection, near_d, far_d) if held is None else held[0]
+        corners.setflags(write=False)
+        held = (corners, _view_space_sphere(corners) if with_sphere else None)
+        if len(_VIEW_SLICES) >= _VIEW_SPHERES_MAX:
+            _VIEW_SLICES.clear()
+        _VIEW_SLICES[key] = held
+    return held
+
+
 def round_up_radius(radius):
     """Round a cascade's sphere radius up to a step of 1/64 of its leading power of two
     (e.g. 1/64 unit for radii 1..2, 1/4 unit for 16..32).
@@ -795,14 +813,15 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
     cascades = []
     for index, resolution in enumerate(resolutions):
         slice_near = splits[index] - (bands[index - 1] if index > 0 else 0.0)
-        view_corners = view_slice_corners(projection, slice_near, splits[index + 1])
+        view_corners, view_sphere = _view_slice(projection, slice_near, splits[index + 1],
+                                                stabilize)
         corners = _transform_points(world_from_view, view_corners)
         sphere = None
         if stabilize:
             # NOTE: the sphere is fitted in view space, where the slice does not depend on
             # the camera's position or orientation at all, so its radius (and the texel
             # size) is bit-for-bit the same while the camera turns.
-            centre_view, radius = _view_space_sphere(view_corners)
+            centre_view, radius = view_sphere
             sphere = (_transform_points(world_from_view, centre_view[None])[0], radius)
         square = None
         if depth_blocks is not None and stabilize:
