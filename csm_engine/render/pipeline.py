@@ -70,33 +70,6 @@ def _same_tile(held, signature):
                 and np.abs(a[2] - b[2]).max() <= TILE_DEPTH_TOLERANCE)
 
 
-# The G-buffer programs' material samplers, in _DrawMaterial.textures order.
-_MATERIAL_SAMPLERS = ("base_color_texture", "normal_texture", "emission_texture",
-                      "surface_texture")
-# Slots without a material draw as Blender's default grey.
-_DEFAULT_MATERIAL = MaterialInfo()
-
-
-class _DrawMaterial:
-    """One material slot ready to draw: its uniform buffer, its four textures (white where
-    there is none, see _MATERIAL_SAMPLERS), alpha and shadow modes, culling, and the key a
-    shadow tile records of it."""
-    __slots__ = ("block", "textures", "alpha_mode", "shadow_mode", "backface_culling",
-                 "backface_culling_shadow", "shadow_key")
-
-    def __init__(self, block, textures, alpha_mode, shadow_mode, backface_culling,
-                 backface_culling_shadow, shadow_key):
-        self.block, self.textures = block, textures
-        self.alpha_mode, self.shadow_mode = alpha_mode, shadow_mode
-        self.backface_culling = backface_culling
-        self.backface_culling_shadow = backface_culling_shadow
-        self.shadow_key = shadow_key
-
-
-# The lighting program of each Shadow Filter setting (shaders.py builds one per filter).
-LIGHTING_PROGRAMS = {"HARD": "lighting_hard", "PCF": "lighting", "SOFT": "lighting_soft"}
-
-
 def _same_textures(cache, textures):
     """Whether the mesh cache still gives each image of ``textures`` ((image, GPU texture
     or False) pairs) the texture it gave when they were recorded."""
@@ -132,6 +105,33 @@ class _InstanceArrays:
         return (keys == self.keys and len(meshes) == len(self.meshes)
                 and all(a is b for a, b in zip(meshes, self.meshes))
                 and world_from_objects.tobytes() == self.matrix_bytes)
+
+
+# The G-buffer programs' material samplers, in _DrawMaterial.textures order.
+_MATERIAL_SAMPLERS = ("base_color_texture", "normal_texture", "emission_texture",
+                      "surface_texture")
+# Slots without a material draw as Blender's default grey.
+_DEFAULT_MATERIAL = MaterialInfo()
+
+
+class _DrawMaterial:
+    """One material slot ready to draw: its uniform buffer, its four textures (white where
+    there is none, see _MATERIAL_SAMPLERS), alpha and shadow modes, culling, and the key a
+    shadow tile records of it."""
+    __slots__ = ("block", "textures", "alpha_mode", "shadow_mode", "backface_culling",
+                 "backface_culling_shadow", "shadow_key")
+
+    def __init__(self, block, textures, alpha_mode, shadow_mode, backface_culling,
+                 backface_culling_shadow, shadow_key):
+        self.block, self.textures = block, textures
+        self.alpha_mode, self.shadow_mode = alpha_mode, shadow_mode
+        self.backface_culling = backface_culling
+        self.backface_culling_shadow = backface_culling_shadow
+        self.shadow_key = shadow_key
+
+
+# The lighting program of each Shadow Filter setting (shaders.py builds one per filter).
+LIGHTING_PROGRAMS = {"HARD": "lighting_hard", "PCF": "lighting", "SOFT": "lighting_soft"}
 
 
 class RenderTargetError(Exception):
