@@ -78,35 +78,59 @@ def settings_snapshot(scene, warnings=None):
     in ``warnings``, so a frame never runs with 99 cascades or a 1-texel map."""
     csm = scene.csm
     values = {}
-    for prop in csm.bl_rna.properties:
-        name = prop.identifier
-        if name in ("rna_type", "name"):
-            continue
+    for name, kind, valid, default, hard_min, hard_max, is_array in _setting_properties(csm):
         value = getattr(csm, name)
-        if prop.type == 'ENUM':
-            valid = [item.identifier for item in prop.enum_items]
+        if kind == 'ENUM':
             if value not in valid:
                 if warnings is not None:
                     warnings.append(f"setting {name} = {value!r} is not one of "
-                                    f"{', '.join(valid)}; using {prop.default!r}")
-                value = prop.default
-        elif prop.type in {'INT', 'FLOAT'}:
-            items = list(value) if getattr(prop, "is_array", False) else [value]
-            cast = int if prop.type == 'INT' else _significant
+                                    f"{', '.join(valid)}; using {default!r}")
+                value = default
+        elif kind in {'INT', 'FLOAT'}:
+            items = list(value) if is_array else [value]
+            cast = int if kind == 'INT' else _significant
             fixed = []
             for item in items:
-                clamped = min(max(item, prop.hard_min), prop.hard_max) \
-                    if item == item else prop.hard_min
+                clamped = min(max(item, hard_min), hard_max) \
+                    if item == item else hard_min
                 if clamped != item and warnings is not None:
                     warnings.append(f"setting {name} = {_significant(item):g} is outside "
-                                    f"{prop.hard_min:g}..{prop.hard_max:g}; using "
+                                    f"{hard_min:g}..{hard_max:g}; using "
                                     f"{_significant(clamped):g}")
                 fixed.append(cast(clamped))
-            value = tuple(fixed) if getattr(prop, "is_array", False) else fixed[0]
+            value = tuple(fixed) if is_array else fixed[0]
         elif hasattr(value, "__len__") and not isinstance(value, str):
             value = tuple(value)
         values[name] = value
     return SimpleNamespace(**values)
+
+
+# The settings' RNA definitions, read once per registered settings class: (name, type,
+# enum identifiers, default, hard min, hard max, is array) per setting. Reading them from
+# bl_rna at every viewport redraw cost more than the values themselves.
+_SETTING_PROPERTIES = {}
+
+
+def _setting_properties(csm):
+    rna = csm.bl_rna
+    key = (type(csm), rna.as_pointer())
+    table = _SETTING_PROPERTIES.get(key)
+    if table is None:
+        table = []
+        for prop in rna.properties:
+            name = prop.identifier
+            if name in ("rna_type", "name"):
+                continue
+            valid = [item.identifier for item in prop.enum_items] \
+                if prop.type == 'ENUM' else None
+            numeric = prop.type in {'INT', 'FLOAT'}
+            table.append((name, prop.type, valid,
+                          prop.default if prop.type == 'ENUM' else None,
+                          prop.hard_min if numeric else None,
+                          prop.hard_max if numeric else None,
+                          bool(getattr(prop, "is_array", False))))
+        table = _SETTING_PROPERTIES[key] = tuple(table)
+    return table
 
 
 def _world_color(world, warnings=None):
@@ -230,6 +254,7 @@ def take(depsgraph, camera, is_viewport=False):
     snap.ambient = world_color * snap.settings.ambient_strength
     snap.background = world_color
 
+    matrices = []
     for instance in depsgraph.object_instances:
         obj = instance.object
         if is_viewport and hasattr(instance, "show_self") and not instance.show_self:
@@ -241,10 +266,16 @@ def take(depsgraph, camera, is_viewport=False):
             # Blender 3.0+ per-object ray visibility, as EEVEE and Cycles honour it: hidden
             # from the camera but still casting, or seen but casting no shadow.
             snap.instances.append(MeshInstance(
-                key, _matrix(instance.matrix_world),
+                key, None,
                 visible_camera=bool(getattr(obj, "visible_camera", True)),
                 casts_shadow=bool(getattr(obj, "visible_shadow", True))))
+            # A copy: the instance (and a Matrix that wraps it) is reused by the iterator.
+            matrices.append(instance.matrix_world.copy())
             snap.mesh_sources.setdefault(key, obj)
+    # One conversion for every instance (one Matrix at a time costs twice as much).
+    for mesh_instance, matrix in zip(snap.instances,
+                                     np.array(matrices, dtype=np.float64).reshape(-1, 4, 4)):
+        mesh_instance.world_from_object = matrix
     for kind, lights, limit in (("point", snap.points, MAX_POINT_LIGHTS),
                                 ("spot", snap.spots, MAX_SPOT_LIGHTS)):
         if len(lights) > limit:

@@ -87,10 +87,13 @@ def _bounds(name, bounds):
     return low, high
 
 
+# Corner i of a box takes the high side on axis a when bit a of i is set.
+_CORNER_PICK = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=bool)
+
+
 def _box_corners(low, high):
     """The 8 corners of an axis-aligned box, (8, 3)."""
-    pick = np.array([[i & 1, (i >> 1) & 1, (i >> 2) & 1] for i in range(8)], dtype=bool)
-    return np.where(pick, high, low)
+    return np.where(_CORNER_PICK, high, low)
 
 
 def _transform_points(matrix, points):
@@ -268,6 +271,11 @@ def light_view_matrix(light_dir_world, up_hint=None):
     it, so the shadow grid never flips.
     """
     forward = vector3("light direction", light_dir_world)
+    key = (forward.tobytes(), None if up_hint is None else
+           np.asarray(up_hint, dtype=np.float64).tobytes())
+    held = _LIGHT_VIEWS.get(key)
+    if held is not None:
+        return held.copy()
     length = np.linalg.norm(forward)
     if not length > 1e-12:
         raise ValueError(f"light direction must not be zero, got {forward.tolist()}")
@@ -286,15 +294,34 @@ def light_view_matrix(light_dir_world, up_hint=None):
     light_from_world = np.eye(4)
     light_from_world[0, :3], light_from_world[1, :3], light_from_world[2, :3] = \
         x_axis, y_axis, z_axis
+    if len(_LIGHT_VIEWS) >= _LIGHT_VIEWS_MAX:
+        _LIGHT_VIEWS.clear()
+    _LIGHT_VIEWS[key] = light_from_world.copy()
     return light_from_world
+
+
+# (light direction, up hint) as bytes -> light_from_world: the sun rarely turns between
+# viewport redraws, and the two cross products cost more than the rest of a cascade.
+_LIGHT_VIEWS = {}
+_LIGHT_VIEWS_MAX = 64
+
+
+_IDENTITY3 = np.eye(3)
+_BOTTOM_ROW = np.array([0.0, 0.0, 0.0, 1.0])
+
+
+def _close(a, b, atol):
+    """``np.allclose(a, b, atol=atol)`` (rtol 1e-5) for finite arrays, without its
+    per-call overhead (~25 us; this runs once per cascade per frame)."""
+    return bool((np.abs(a - b) <= atol + 1e-5 * np.abs(b)).all())
 
 
 def _check_rotation(light_from_world_rot):
     m = matrix4("light_from_world rotation", light_from_world_rot)
     rotation = m[:3, :3]
-    if not (np.allclose(rotation @ rotation.T, np.eye(3), atol=1e-6)
-            and np.linalg.det(rotation) > 0.0 and np.allclose(m[:3, 3], 0.0, atol=1e-9)
-            and np.allclose(m[3], (0.0, 0.0, 0.0, 1.0))):
+    if not (_close(rotation @ rotation.T, _IDENTITY3, 1e-6)
+            and np.linalg.det(rotation) > 0.0 and _close(m[:3, 3], 0.0, 1e-9)
+            and _close(m[3], _BOTTOM_ROW, 1e-8)):
         raise ValueError("light_from_world rotation must be a pure rotation "
                          "(orthonormal, determinant +1, no translation); "
                          "build it with light_view_matrix()")
@@ -371,6 +398,24 @@ def _view_space_sphere(view_corners):
         centre.setflags(write=False)
         sphere = _VIEW_SPHERES[key] = (centre, radius)
     return sphere
+
+
+# (projection, near depth, far depth) -> the slice's view-space corners and, once asked
+# for, their bounding sphere: the same for every redraw that only moves the camera.
+_VIEW_SLICES = {}
+
+
+def _view_slice(projection, near_d, far_d, with_sphere):
+    key = (projection, float(near_d), float(far_d))
+    held = _VIEW_SLICES.get(key)
+    if held is None or (with_sphere and held[1] is None):
+        corners = view_slice_corners(projection, near_d, far_d) if held is None else held[0]
+        corners.setflags(write=False)
+        held = (corners, _view_space_sphere(corners) if with_sphere else None)
+        if len(_VIEW_SLICES) >= _VIEW_SPHERES_MAX:
+            _VIEW_SLICES.clear()
+        _VIEW_SLICES[key] = held
+    return held
 
 
 def round_up_radius(radius):
@@ -549,9 +594,7 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
 
     The far plane is the slice's far side: receivers only exist inside the slice.
     """
-    corners = np.asarray(slice_corners_world, dtype=np.float64)
-    if corners.shape != (8, 3) or not np.all(np.isfinite(corners)):
-        raise ValueError(f"slice corners must be 8 finite 3D points, got shape {corners.shape}")
+    corners = _slice_corners(slice_corners_world)
     rotation = _check_rotation(light_from_world_rot)
     resolution = _resolution("cascade resolution", resolution)
     if resolution < 2:
@@ -559,15 +602,40 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
     margin = finite("occluder margin", occluder_margin)
     if margin < 0.0:
         raise ValueError(f"occluder margin must not be negative, got {margin}")
+    if stabilize and bounding_sphere_world is not None:
+        bounding_sphere_world = (vector3("bounding sphere centre", bounding_sphere_world[0]),
+                                 finite("bounding sphere radius", bounding_sphere_world[1]))
+    scene_near = None if scene_bounds is None else \
+        _scene_near_depth(_bounds("scene bounds", scene_bounds), rotation)
+    return _fit_checked(corners, rotation, resolution, stabilize, margin, scene_near,
+                        bounding_sphere_world, receiver_box)
 
+
+def _slice_corners(slice_corners_world):
+    corners = np.asarray(slice_corners_world, dtype=np.float64)
+    if corners.shape != (8, 3) or not np.isfinite(corners).all():
+        raise ValueError(f"slice corners must be 8 finite 3D points, got shape {corners.shape}")
+    return corners
+
+
+def _scene_near_depth(scene_box, rotation):
+    """Depth along the light (rotated light frame) of the scene box's corner nearest the
+    light: the near plane reaches at least there, so no caster is clipped."""
+    return float(-(_box_corners(*scene_box) @ rotation[2]).max())
+
+
+def _fit_checked(corners, rotation, resolution, stabilize, margin, scene_near,
+                 bounding_sphere_world, receiver_box):
+    """``fit_cascade`` on checked inputs: (8, 3) corners, a 3x3 rotation, an int
+    resolution, a float margin, the scene's ``_scene_near_depth`` or None, a (centre,
+    radius) sphere or None. ``compute_cascades`` checks its inputs once per frame and calls
+    this per cascade (the checks cost as much as the fit)."""
     # Rotated light frame ("rot"): light axes, world origin. Depth along the light is -z.
-    corners_rot = corners @ rotation.T
     if stabilize:
         if bounding_sphere_world is None:
             centre_world, radius = bounding_sphere(corners)
         else:
-            centre_world = vector3("bounding sphere centre", bounding_sphere_world[0])
-            radius = finite("bounding sphere radius", bounding_sphere_world[1])
+            centre_world, radius = bounding_sphere_world
         radius = round_up_radius(max(radius, 1e-9))
         depth_radius = radius
         radius_xy = np.array([radius, radius])
@@ -607,6 +675,7 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
         texel_xy = texel
         sphere_centre = centre_world
     else:
+        corners_rot = corners @ rotation.T
         low_xy, high_xy = corners_rot[:, :2].min(axis=0), corners_rot[:, :2].max(axis=0)
         # A slice seen edge-on by the light is flat in one axis; keep the box non-empty.
         spread = max(float(np.max(high_xy - low_xy)), 1e-9)
@@ -619,10 +688,8 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
         sphere_centre, radius = None, math.nan
 
     near_depth = nearest_depth - margin
-    if scene_bounds is not None:
-        low, high = _bounds("scene bounds", scene_bounds)
-        scene_rot_z = _box_corners(low, high) @ rotation[2]
-        near_depth = min(near_depth, float(-scene_rot_z.max()))
+    if scene_near is not None:
+        near_depth = min(near_depth, scene_near)
     if not farthest_depth > near_depth:
         farthest_depth = near_depth + 1e-6 * max(1.0, abs(near_depth))
 
@@ -727,21 +794,34 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
     splits = split_distances(first, last, count, scheme, lam=lam, manual=manual)
     resolutions = cascade_resolutions(len(splits) - 1, base_resolution, equal_resolution)
     rotation = light_view_matrix(light_dir, up_hint)
+    scene_box = None if scene_bounds is None else _bounds("scene bounds", scene_bounds)
     if occluder_margin is None:
-        occluder_margin = default_occluder_margin(scene_bounds)
+        occluder_margin = 0.0 if scene_box is None else \
+            float(np.linalg.norm(scene_box[1] - scene_box[0]))    # default_occluder_margin
+    # Checked once here rather than per cascade in fit_cascade (a viewport redraw runs this
+    # for every camera move). light_view_matrix builds a pure rotation by construction.
+    margin = finite("occluder margin", occluder_margin)
+    if margin < 0.0:
+        raise ValueError(f"occluder margin must not be negative, got {margin}")
+    scene_near = None if scene_box is None else \
+        _scene_near_depth(scene_box, rotation[:3, :3])
+    if min(resolutions) < 2:
+        raise ValueError(f"cascade resolution must be at least 2 texels, "
+                         f"got {min(resolutions)}")
 
     bands = blend_band_widths(splits, blend_band)
     cascades = []
     for index, resolution in enumerate(resolutions):
         slice_near = splits[index] - (bands[index - 1] if index > 0 else 0.0)
-        view_corners = view_slice_corners(projection, slice_near, splits[index + 1])
+        view_corners, view_sphere = _view_slice(projection, slice_near, splits[index + 1],
+                                                stabilize)
         corners = _transform_points(world_from_view, view_corners)
         sphere = None
         if stabilize:
             # NOTE: the sphere is fitted in view space, where the slice does not depend on
             # the camera's position or orientation at all, so its radius (and the texel
             # size) is bit-for-bit the same while the camera turns.
-            centre_view, radius = _view_space_sphere(view_corners)
+            centre_view, radius = view_sphere
             sphere = (_transform_points(world_from_view, centre_view[None])[0], radius)
         square = None
         if depth_blocks is not None and stabilize:
@@ -749,9 +829,8 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
                 index < len(previous_squares) else None
             square = receiver_square(world_from_view, projection, depth_blocks, slice_near,
                                      splits[index + 1], rotation, previous)
-        fit = fit_cascade(corners, rotation, resolution, stabilize=stabilize,
-                          occluder_margin=occluder_margin, scene_bounds=scene_bounds,
-                          bounding_sphere_world=sphere, receiver_box=square)
+        fit = _fit_checked(_slice_corners(corners), rotation[:3, :3], resolution,
+                           stabilize, margin, scene_near, sphere, square)
         fit.receiver_rectangle = square
         fit.split_near, fit.split_far = float(splits[index]), float(splits[index + 1])
         cascades.append(fit)
@@ -831,16 +910,34 @@ def visible_depth_range(nearest, farthest, previous=None, steps_per_octave=8,
     return (low, high)
 
 
-def aabbs_in_cascade(aabb_min_world, aabb_max_world, cascade):
+def aabbs_in_cascade(aabb_min_world, aabb_max_world, cascade, checked=False):
     """Which of N world AABBs may cast into the cascade: (N, 3), (N, 3) -> (N,) bool.
 
     Conservative: each box is taken to light space as the AABB of its 8 transformed corners
     (computed exactly as centre + |rotation| * half-extent), and it is kept when that
     overlaps the shadow box in x and y and its nearest-to-light point is not beyond the far
     plane. Anything between the light and the box stays: it can shadow the slice.
+    ``checked``: the boxes are known to be finite float64 (N, 3) pairs with min <= max
+    (``boxes_are_valid``), so they are not checked again for every cascade.
     """
     low = np.asarray(aabb_min_world, dtype=np.float64)
     high = np.asarray(aabb_max_world, dtype=np.float64)
+    if not checked:
+        _check_boxes(low, high)
+    return _boxes_in_cascade(low, high, cascade)
+
+
+def boxes_are_valid(aabb_min_world, aabb_max_world):
+    """Whether (N, 3) mins and maxs are what ``aabbs_in_cascade`` accepts."""
+    try:
+        _check_boxes(np.asarray(aabb_min_world, dtype=np.float64),
+                     np.asarray(aabb_max_world, dtype=np.float64))
+    except ValueError:
+        return False
+    return True
+
+
+def _check_boxes(low, high):
     if low.ndim != 2 or low.shape[1] != 3 or low.shape != high.shape:
         raise ValueError(f"AABB mins and maxs must both be (N, 3), got {low.shape} "
                          f"and {high.shape}")
@@ -850,6 +947,9 @@ def aabbs_in_cascade(aabb_min_world, aabb_max_world, cascade):
         index = int(np.flatnonzero(bad)[0])
         raise ValueError(f"AABB {index} is not a box: min {low[index].tolist()}, "
                          f"max {high[index].tolist()}")
+
+
+def _boxes_in_cascade(low, high, cascade):
     matrix = cascade.light_from_world
     centre = _transform_points(matrix, 0.5 * (low + high))
     extent = 0.5 * (high - low) @ np.abs(matrix[:3, :3]).T

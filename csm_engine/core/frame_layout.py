@@ -78,6 +78,10 @@ _RESERVED = {"filter", "sample", "input", "output", "common", "partition", "acti
              "resource", "patch", "buffer", "shared", "precise", "layout"}
 
 
+# Single values the packing writes directly (see UniformLayout._write_one).
+_NUMBERS = (int, float, np.number)
+
+
 def _round_up(value, multiple):
     return (value + multiple - 1) // multiple * multiple
 
@@ -90,6 +94,9 @@ class Field:
         self.name, self.kind, self.count, self.doc = name, kind, count, doc
         self.offset = offset      # bytes from the start of the enclosing struct
         self.stride = stride      # bytes from one array element to the next (std140)
+        # One number (True: an int, False: a float), else None: written directly by write.
+        self.single = None if isinstance(kind, UniformLayout) or _BASIC[kind][0] != 1 \
+            else _BASIC[kind][3] is np.int32
 
     @property
     def is_struct(self):
@@ -211,9 +218,26 @@ class UniformLayout:
 
     def write(self, data, values, base=0):
         """Write ``values`` into ``data`` with this struct starting at byte ``base``."""
+        ints = None
         for name, value in values.items():
-            field = self.field(name)
+            field = self._by_name.get(name) or self.field(name)
             if field.count is None:
+                single = field.single
+                if single is not None and isinstance(value, _NUMBERS):
+                    # NOTE: most of a frame block is single numbers; written here without
+                    # the array round trip of _write_one (a viewport redraw packs a frame
+                    # or two). Same checks, same float32 rounding.
+                    number = float(value)
+                    if single:
+                        if number != round(number):
+                            raise ValueError(f"{self.type_name}.{name}: int field given "
+                                             f"{value!r}")
+                        if ints is None:
+                            ints = data.view(np.int32)
+                        ints[(base + field.offset) // 4] = int(number)
+                    else:
+                        data[(base + field.offset) // 4] = number
+                    continue
                 self._write_one(data, field, base + field.offset, value)
                 continue
             items = list(value)
@@ -231,6 +255,16 @@ class UniformLayout:
             field.kind.write(data, value, at)
             return
         components, _, _, dtype = _BASIC[field.kind]
+        if field.single is not None and isinstance(value, _NUMBERS):
+            number = float(value)
+            if field.single:
+                if number != round(number):
+                    raise ValueError(f"{self.type_name}.{field.name}: int field given "
+                                     f"{value!r}")
+                data.view(np.int32)[at // 4] = int(number)
+            else:
+                data[at // 4] = number
+            return
         flat = np.asarray(value, dtype=np.float64)
         if field.kind == "mat4":
             if flat.shape != (4, 4):

@@ -198,6 +198,24 @@ def plan_shadows(snap, bounds, depth_blocks=None):
                       warnings)
 
 
+def gbuffer_plan(snap, bounds):
+    """The plan a Fit to Visible Depth frame draws its G-buffer with, before the visible
+    depths are known. The G-buffer passes read only the camera (and the sample index) from
+    the frame block, so no cascades are fitted for it: the real plan follows from the
+    G-buffer's depths (``plan_shadows`` with ``depth_blocks``).
+
+    NOTE: on the first frame of Freeze Cascades the plain plan is made here, as it always
+    was: it is the one that stays frozen."""
+    s = snap.settings
+    if s.freeze_cascades and snap.scene_name not in _FROZEN:
+        return plan_shadows(snap, bounds)
+    camera = snap.camera
+    distance = s.shadow_distance if s.shadow_distance > 0 else camera.clip_end
+    distance = float(min(max(distance, camera.clip_start * 1.001), camera.clip_end))
+    return ShadowPlan([], 0, np.array([camera.clip_start, distance]), np.zeros(MAX_CASCADES),
+                      distance, {}, None, [])
+
+
 def layout_atlas(tiles):
     """Shelf-pack square tiles into one atlas; returns (width, height) in texels."""
     x = y = row_height = width = 0
@@ -221,10 +239,24 @@ def window_normal_from_world(tile):
     out = np.zeros((4, 4))
     if tile.is_perspective:
         return out
-    linear = (WINDOW_FROM_CLIP @ np.asarray(tile.clip_from_world, dtype=np.float64))[:3, :3]
+    clip_from_world = np.asarray(tile.clip_from_world, dtype=np.float64)
+    key = clip_from_world.tobytes()
+    held = _WINDOW_NORMALS.get(key)
+    if held is not None:
+        return held.copy()
+    linear = (WINDOW_FROM_CLIP @ clip_from_world)[:3, :3]
     out[:3, :3] = np.linalg.inv(linear).T
     out[3, 3] = 1.0
+    if len(_WINDOW_NORMALS) >= _WINDOW_NORMALS_MAX:
+        _WINDOW_NORMALS.clear()
+    _WINDOW_NORMALS[key] = out.copy()
     return out
+
+
+# clip_from_world bytes -> window_normal_from_world: a stabilized cascade keeps its matrix
+# over many viewport redraws, and the inverse is a third of packing a frame.
+_WINDOW_NORMALS = {}
+_WINDOW_NORMALS_MAX = 64
 
 
 def sun_tan_half_angle(sun):
@@ -236,13 +268,16 @@ def sun_tan_half_angle(sun):
     return math.tan(0.5 * angle)
 
 
-def ambient_occlusion_fields(snap):
+def ambient_occlusion_fields(snap, clip_from_world=None):
     """The frame block's ``ao_*`` fields: the AO settings, and what ao_frag.glsl needs to
-    turn a pixel and its view depth into a view-space point and a distance into pixels."""
+    turn a pixel and its view depth into a view-space point and a distance into pixels.
+    ``clip_from_world``: the camera's, when the caller has it already."""
     s = snap.settings
     camera = snap.camera
     enabled = bool(getattr(s, "ambient_occlusion", False))
-    clip_from_view = np.asarray(camera.clip_from_world, dtype=np.float64) @ \
+    if clip_from_world is None:
+        clip_from_world = camera.clip_from_world
+    clip_from_view = np.asarray(clip_from_world, dtype=np.float64) @ \
         np.asarray(camera.world_from_view, dtype=np.float64)
     p = clip_from_view
     if camera.is_perspective:
@@ -258,13 +293,52 @@ def ambient_occlusion_fields(snap):
                 ao_view_ray=view_ray)
 
 
-def pack_frame(snap, plan):
-    """The frame uniform block for this frame (std140 float32 array, ``FRAME_LAYOUT``)."""
+# The last camera packed: (its matrices as bytes, (clip_from_world, view_from_world,
+# world_from_clip)). A Fit to Visible Depth frame packs its camera twice.
+_LAST_CAMERA = [None, None]
+
+
+def _camera_matrices(camera):
+    """clip_from_world, view_from_world and world_from_clip of ``camera`` (three 4x4
+    inverses, so the last camera's are kept)."""
+    world_from_view = np.asarray(camera.world_from_view, dtype=np.float64)
+    clip_from_view = getattr(camera, "clip_from_view", None)    # a CameraView's
+    key = None if clip_from_view is None else \
+        world_from_view.tobytes() + np.asarray(clip_from_view, dtype=np.float64).tobytes()
+    if key is None or _LAST_CAMERA[0] != key:
+        clip_from_world = camera.clip_from_world
+        matrices = (clip_from_world, np.linalg.inv(world_from_view),
+                    np.linalg.inv(clip_from_world))
+        for matrix in matrices:
+            matrix.setflags(write=False)
+        _LAST_CAMERA[:] = [key, matrices]
+    return _LAST_CAMERA[1]
+
+
+def pack_frame(snap, plan, like=None):
+    """The frame uniform block for this frame (std140 float32 array, ``FRAME_LAYOUT``).
+    ``like``: a block packed by this function for the same, unchanged ``snap`` with another
+    plan (a Fit to Visible Depth frame packs twice): it is copied and only what depends on
+    the plan is written again."""
+    plan_values = _plan_fields(snap, plan)
+    if like is None:
+        return FRAME_LAYOUT.pack({**_snapshot_fields(snap), **plan_values})
+    data = like.copy()
+    for name in _PLAN_ARRAYS:       # rows the other plan used and this one may not
+        field = FRAME_LAYOUT.field(name)
+        data[field.offset // 4:(field.offset + field.count * field.stride) // 4] = 0.0
+    FRAME_LAYOUT.write(data, plan_values)
+    return data
+
+
+# The frame block's arrays that depend on the plan (spot lights: their shadow tile).
+_PLAN_ARRAYS = ("cascades", "shadow_tiles", "spot_lights")
+
+
+def _plan_fields(snap, plan):
+    """The frame block's fields that depend on the shadow plan."""
     s = snap.settings
-    camera = snap.camera
-    points = snap.points[:MAX_POINT_LIGHTS]
     spots = snap.spots[:MAX_SPOT_LIGHTS]
-    sun = snap.sun
     fade_start = plan.shadow_distance * (1.0 - s.fade_fraction) if s.fade_out \
         else plan.shadow_distance * 2.0
     count = plan.cascade_count
@@ -280,9 +354,6 @@ def pack_frame(snap, plan):
                       is_perspective=int(tile.is_perspective), display_near=tile.display_near,
                       window_normal_from_world=window_normal_from_world(tile))
                  for tile in plan.tiles]
-    point_rows = [dict(position=light.position, radius=light.radius, color=light.color,
-                       falloff=LIGHT_FALLOFF_INDEX[light.falloff])
-                  for light in points]
     spot_rows = []
     for i, spot in enumerate(spots):
         cos_outer, cos_inner = spot_cone_cosines(spot)
@@ -291,10 +362,33 @@ def pack_frame(snap, plan):
                               cos_outer=cos_outer, cos_inner=cos_inner,
                               falloff=LIGHT_FALLOFF_INDEX[spot.falloff],
                               source_radius=spot.source_radius))
-    return FRAME_LAYOUT.pack(dict(
-        clip_from_world=camera.clip_from_world,
-        view_from_world=np.linalg.inv(camera.world_from_view),
-        world_from_clip=np.linalg.inv(camera.clip_from_world),
+    return dict(
+        sun_casts_shadow=int(snap.sun is not None and count > 0),
+        cascade_count=count,
+        shadow_distance=plan.shadow_distance,
+        fade_start_depth=fade_start,
+        cascades=cascade_rows,
+        shadow_tiles=tile_rows,
+        spot_lights=spot_rows,
+    )
+
+
+def _snapshot_fields(snap):
+    """The frame block's fields that depend only on the snapshot (camera, lights,
+    settings)."""
+    s = snap.settings
+    camera = snap.camera
+    points = snap.points[:MAX_POINT_LIGHTS]
+    spots = snap.spots[:MAX_SPOT_LIGHTS]
+    sun = snap.sun
+    point_rows = [dict(position=light.position, radius=light.radius, color=light.color,
+                       falloff=LIGHT_FALLOFF_INDEX[light.falloff])
+                  for light in points]
+    clip_from_world, view_from_world, world_from_clip = _camera_matrices(camera)
+    return dict(
+        clip_from_world=clip_from_world,
+        view_from_world=view_from_world,
+        world_from_clip=world_from_clip,
         camera_position=camera.position,
         is_perspective=int(bool(camera.is_perspective)),
         camera_forward=camera.forward,
@@ -305,10 +399,6 @@ def pack_frame(snap, plan):
         sun_direction=sun.to_light if sun is not None else (0.0, 0.0, 0.0),
         has_sun=int(sun is not None),
         sun_color=sun.color if sun is not None else (0.0, 0.0, 0.0),
-        sun_casts_shadow=int(sun is not None and count > 0),
-        cascade_count=count,
-        shadow_distance=plan.shadow_distance,
-        fade_start_depth=fade_start,
         pcf_radius_texels=s.pcf_radius,
         pcf_pattern=PCF_PATTERN_INDEX[s.pcf_pattern],
         depth_bias_texels=s.depth_bias,
@@ -321,12 +411,9 @@ def pack_frame(snap, plan):
         debug_view=DEBUG_VIEW_INDEX[s.debug_view],
         debug_shadow_map=s.debug_shadow_map,
         debug_inset=int(bool(s.debug_inset)),
-        cascades=cascade_rows,
-        shadow_tiles=tile_rows,
-        **ambient_occlusion_fields(snap),
+        **ambient_occlusion_fields(snap, clip_from_world),
         point_lights=point_rows,
-        spot_lights=spot_rows,
-    ))
+    )
 
 
 def front_to_back(snap, bounds_lo_hi):

@@ -27,7 +27,7 @@ import numpy as np
 from ..core import cascades
 from ..core.camera import world_positions
 from ..core.shadow_plan import (CASCADE_LINE_COLORS, depth_blocks_from_reduction,
-                                front_to_back, instance_bounds,
+                                front_to_back, gbuffer_plan, instance_bounds,
                                 layout_atlas, pack_frame, plan_shadows)
 from ..core.material_layout import pack_material
 from . import shaders
@@ -68,6 +68,43 @@ def _same_tile(held, signature):
     a, b = held[3], signature[3]
     return bool(np.array_equal(a[(0, 1, 3), :], b[(0, 1, 3), :])
                 and np.abs(a[2] - b[2]).max() <= TILE_DEPTH_TOLERANCE)
+
+
+def _same_textures(cache, textures):
+    """Whether the mesh cache still gives each image of ``textures`` ((image, GPU texture
+    or False) pairs) the texture it gave when they were recorded."""
+    try:
+        return all(cache.textures.get(image.name) is texture for image, texture in textures)
+    except ReferenceError:      # an image removed since
+        return False
+
+
+class _InstanceArrays:
+    """Per-instance arrays of one frame, kept while the instances are the same (viewport
+    redraws that only move the view): world matrices (N, 4, 4), the same as GLSL lists,
+    which are mirrored, and the world AABBs (``instance_bounds``)."""
+    __slots__ = ("keys", "meshes", "matrix_bytes", "world_from_objects",
+                 "world_from_objects_gl", "mirrored", "bounds_lo_hi", "bounds_checked")
+
+    def __init__(self, snap, cache, keys, meshes, world_from_objects):
+        self.keys, self.meshes = keys, meshes
+        self.world_from_objects = world_from_objects
+        self.matrix_bytes = world_from_objects.tobytes()
+        self.world_from_objects_gl = _column_major_stack(world_from_objects)
+        # Negative scale turns a triangle's winding around: back-face culling of a mirrored
+        # instance culls its front-wound faces.
+        self.mirrored = np.linalg.det(world_from_objects[:, :3, :3]) < 0.0
+        self.bounds_lo_hi = instance_bounds(snap.instances, cache.meshes)
+        # Checked once here, not again for every cascade's culling (``_cull``).
+        self.bounds_checked = self.bounds_lo_hi is not None and \
+            cascades.boxes_are_valid(*self.bounds_lo_hi)
+
+    def holds(self, keys, meshes, world_from_objects):
+        """Whether these arrays are those of ``keys`` drawn with ``meshes`` (GPUMesh or
+        None per instance: a re-upload is a new object, so new bounds) at these matrices."""
+        return (keys == self.keys and len(meshes) == len(self.meshes)
+                and all(a is b for a, b in zip(meshes, self.meshes))
+                and world_from_objects.tobytes() == self.matrix_bytes)
 
 
 # The G-buffer programs' material samplers, in _DrawMaterial.textures order.
@@ -260,15 +297,16 @@ class Pipeline:
 
         # World AABB per instance: caster culling per cascade, and the scene's bounds for the
         # automatic occluder margin.
-        bounds_lo_hi = instance_bounds(snap.instances, cache.meshes)
+        instances = self._instance_arrays(snap, cache)
+        bounds_lo_hi = instances.bounds_lo_hi
         bounds = None if bounds_lo_hi is None else \
             (bounds_lo_hi[0].min(axis=0), bounds_lo_hi[1].max(axis=0))
         # Fit to Visible Depth needs the G-buffer's depths before it can plan; the frame
-        # block it draws the G-buffer with needs a plan: the plain one (the G-buffer reads
-        # only the camera from it).
+        # block it draws the G-buffer with needs a plan: one without cascades (the G-buffer
+        # reads only the camera from it).
         fit_to_visible = plan is None and bool(getattr(snap.settings, "fit_to_visible", False))
         if plan is None:
-            plan = plan_shadows(snap, bounds)
+            plan = gbuffer_plan(snap, bounds) if fit_to_visible else plan_shadows(snap, bounds)
         self.warnings.extend(w for w in snap.warnings + plan.warnings if w not in self.warnings)
         atlas = None if fit_to_visible else self._atlas(plan)
         frame_data = pack_frame(snap, plan)
@@ -278,13 +316,10 @@ class Pipeline:
         # Once per frame: each instance's batches, opaque and alpha-masked apart, with
         # their material inputs, and its matrix; the passes below only index into these.
         white = self._white_texture()
-        items = self._draw_items(snap, cache, white)
-        world_from_objects = np.array([i.world_from_object for i in snap.instances],
-                                      dtype=np.float64).reshape(-1, 4, 4)
-        world_from_objects_gl = _column_major_stack(world_from_objects)
-        # Negative scale turns a triangle's winding around: back-face culling of a mirrored
-        # instance culls its front-wound faces.
-        mirrored = np.linalg.det(world_from_objects[:, :3, :3]) < 0.0
+        items = self._kept_draw_items(snap, cache, white)
+        world_from_objects = instances.world_from_objects
+        world_from_objects_gl = instances.world_from_objects_gl
+        mirrored = instances.mirrored
 
         def shadow_pass(t):
             """1. Shadow atlas: only tiles whose contents would change are cleared and
@@ -418,7 +453,7 @@ class Pipeline:
             plan = plan_shadows(snap, bounds, blocks)
             self.warnings.extend(w for w in plan.warnings if w not in self.warnings)
             atlas = self._atlas(plan)
-            frame_ubo = self._frame_ubo(pack_frame(snap, plan))
+            frame_ubo = self._frame_ubo(pack_frame(snap, plan, like=frame_data))
             t = shadow_pass(t)
         else:
             t = shadow_pass(t)
@@ -530,6 +565,20 @@ class Pipeline:
         if culling != default:
             gpu.state.face_culling_set(default)
 
+    def _instance_arrays(self, snap, cache):
+        """This frame's ``_InstanceArrays``: the last frame's when the instances, their
+        meshes and matrices are the same, else new ones."""
+        instances = snap.instances
+        keys = tuple(i.key for i in instances)
+        meshes = [cache.meshes.get(key) for key in keys]
+        world_from_objects = np.array([i.world_from_object for i in instances],
+                                      dtype=np.float64).reshape(-1, 4, 4)
+        held = getattr(self, "_held_instances", None)
+        if held is None or not held.holds(keys, meshes, world_from_objects):
+            held = self._held_instances = _InstanceArrays(snap, cache, keys, meshes,
+                                                          world_from_objects)
+        return held
+
     def _atlas_contents(self, atlas):
         """What each tile of ``atlas`` holds: (origin, resolution) -> the signature it was
         drawn with. Kept beside the atlas texture (final renders share it between
@@ -540,23 +589,32 @@ class Pipeline:
             self._textures["atlas_contents"] = held
         return held[1]
 
-    @staticmethod
-    def _caster_signatures(snap, cache, items):
+    def _caster_signatures(self, snap, cache, items):
         """Per instance, what its shadow depends on besides its matrix: the geometry
         (``GPUMesh.serial``, never reused, unlike ``id()``) and the alpha-masked draws'
         cut-out inputs. A masked draw with an image texture gives None, which never equals
         a held signature: the image may have been edited in place."""
         per_key = {}
         signatures = []
+        # A mesh's signature is kept with its draw lists (``_draw_items``): the same lists
+        # (the same object) have the same signature.
+        held = getattr(self, "_held_signatures", {})
+        kept = {}
         for instance, entry in zip(snap.instances, items):
             if instance.key not in per_key:
-                mesh = cache.meshes.get(instance.key)
-                keys = tuple(material.shadow_key for _b, material in entry[2] + entry[3])
-                signature = (mesh.serial if mesh is not None else 0, keys)
-                if None in keys:
-                    signature = None
+                known = held.get(instance.key)
+                if known is not None and known[0] is entry:
+                    signature = known[1]
+                else:
+                    mesh = cache.meshes.get(instance.key)
+                    keys = tuple(material.shadow_key for _b, material in entry[2] + entry[3])
+                    signature = (mesh.serial if mesh is not None else 0, keys)
+                    if None in keys:
+                        signature = None
                 per_key[instance.key] = signature
+                kept[instance.key] = (entry, signature)
             signatures.append(per_key[instance.key])
+        self._held_signatures = kept
         return signatures
 
     def _gpu_call(self, call, *args, **kwargs):
@@ -572,8 +630,36 @@ class Pipeline:
             return range(0)
         if tile.cascade is None:    # spot tiles: no caster culling (few, small frusta)
             return range(len(instances))
-        mask = cascades.aabbs_in_cascade(bounds_lo_hi[0], bounds_lo_hi[1], tile.cascade)
+        held = getattr(self, "_held_instances", None)
+        checked = held is not None and held.bounds_lo_hi is bounds_lo_hi and held.bounds_checked
+        mask = cascades.aabbs_in_cascade(bounds_lo_hi[0], bounds_lo_hi[1], tile.cascade,
+                                         checked=checked)
         return np.nonzero(mask)[0]
+
+    def _kept_draw_items(self, snap, cache, white):
+        """``_draw_items``, kept from the last frame while it would come out the same: the
+        same meshes (a re-upload is a new GPUMesh), the same MaterialInfo lists (a material
+        edit makes new ones, see MeshCache.sync) and, for every image, the same GPU texture
+        (an edited image's texture is dropped from the cache)."""
+        keys = tuple(instance.key for instance in snap.instances)
+        held = getattr(self, "_held_draws", None)
+        if held is not None and held[0] == keys and held[1] is white and \
+                all(cache.meshes.get(key) is mesh and
+                    (mesh is None or mesh.materials is materials)
+                    for key, mesh, materials in held[2]) and _same_textures(cache, held[3]):
+            return held[4]
+        items = self._draw_items(snap, cache, white)
+        meshes = [(key, cache.meshes.get(key)) for key in dict.fromkeys(keys)]
+        textures = tuple((image, cache.textures.get(image.name))
+                         for _key, mesh in meshes if mesh is not None
+                         for info in mesh.materials
+                         for image in (info.image, info.normal_image, info.emission_image,
+                                       info.surface_image)
+                         if image is not None)
+        self._held_draws = (keys, white, [(key, mesh, mesh.materials if mesh is not None
+                                           else None) for key, mesh in meshes],
+                            textures, items)
+        return items
 
     def _draw_items(self, snap, cache, white):
         """Per instance: (camera opaque textured draws, camera alpha-tested draws, shadow

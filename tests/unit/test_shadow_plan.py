@@ -92,3 +92,29 @@ def test_pack_frame_fills_exactly_the_layout():
     assert data.nbytes == FRAME_LAYOUT.new_data().nbytes
     assert data.nbytes % 16 == 0, "std140 blocks are whole vec4s"
     assert np.all(np.isfinite(data))
+
+
+def test_a_frame_packed_from_the_gbuffer_plan_repacks_to_the_same_bytes():
+    """Fit to Visible Depth packs a frame twice: first from ``gbuffer_plan`` (no cascades;
+    the G-buffer reads only the camera), then from the fitted plan ``like`` the first. The
+    second block must equal a fresh pack of the fitted plan, spot lights' tiles included."""
+    snap = _snapshot(fit_to_visible=True)
+    world_from_light = np.eye(4)
+    world_from_light[:3, 3] = (0.0, 0.0, 10.0)
+    for x in (-5.0, 5.0):
+        snap.spots.append(SpotLight(position=np.array([x, 0.0, 10.0]),
+                                    direction=np.array([0.0, 0.0, -1.0]), color=np.ones(3),
+                                    radius=30.0, spot_size=math.radians(60), spot_blend=0.1,
+                                    casts_shadow=x > 0, world_from_light=world_from_light,
+                                    clip_start=0.1))
+    first_plan = shadow_plan.gbuffer_plan(snap, BOUNDS)
+    assert first_plan.tiles == [] and first_plan.cascade_count == 0
+    first = shadow_plan.pack_frame(snap, first_plan)
+    plan = shadow_plan.plan_shadows(snap, BOUNDS)
+    shadow_plan.layout_atlas(plan.tiles)
+    # Bytes, not values: int fields (a spot's shadow tile -1) read as float are NaN.
+    assert shadow_plan.pack_frame(snap, plan, like=first).tobytes() == \
+        shadow_plan.pack_frame(snap, plan).tobytes()
+    # and back: a block with more tiles repacked from a plan with fewer leaves no rows
+    full = shadow_plan.pack_frame(snap, plan)
+    assert shadow_plan.pack_frame(snap, first_plan, like=full).tobytes() == first.tobytes()
