@@ -15,8 +15,9 @@
  * bleed across silhouettes and a grazing plane still blurs along itself. The lighting pass
  * brings it to full resolution (ambient_occlusion_at in lighting_frag.glsl).
  *
- * NOTE: the blur ran at full resolution until 2026-11-24: 16 neighbours for each of 4x as
- * many pixels made it the larger half of the AO's cost on llvmpipe.
+ * NOTE: until the sixth session (2026-11-23) the blur ran at full resolution: 16
+ * neighbours for each of 4x as many pixels made it the larger half of the AO's cost on
+ * llvmpipe.
  *
  * Inputs: the G-buffer's view depth (0 = background) and world normal. Both programs
  * write (AO, the view depth of the full-resolution pixel the value stands for), so the
