@@ -226,6 +226,10 @@ class Pipeline:
             self._framebuffers[key] = fb
         return fb
 
+    def gbuffer_depth_texture(self, width, height):
+        """The G-buffer's depth buffer; attached to a lighting target too (see draw)."""
+        return self._texture("depth", (width, height), 'DEPTH_COMPONENT32F')
+
     def _fullscreen_batch(self):
         import gpu
         if self._fullscreen is None:
@@ -279,8 +283,10 @@ class Pipeline:
 
     # -- passes ------------------------------------------------------------------------
     def draw(self, snap, cache, target_fb=None, width=None, height=None, plan=None,
-             overlays=True):
+             overlays=True, depth_tested=False):
         """Render one frame into ``target_fb`` (None: the currently bound framebuffer).
+        ``depth_tested``: ``target_fb`` has the G-buffer's depth texture attached
+        (``gbuffer_depth_texture``), so lighting can skip the background.
         ``plan``: a shadow plan to reuse (the jittered samples of one final render share
         the plan of its unjittered camera, so their shadow maps are drawn once).
         ``overlays``: draw the frozen cascade boxes; anti-aliased frames draw them after
@@ -384,7 +390,7 @@ class Pipeline:
             albedo = self._texture("albedo", (width, height), 'RGBA16F')
             normal = self._texture("normal", (width, height), 'RGBA16F')
             view_depth = self._texture("view_depth", (width, height), 'R32F')
-            depth = self._texture("depth", (width, height), 'DEPTH_COMPONENT32F')
+            depth = self.gbuffer_depth_texture(width, height)
             emission = self._texture("emission", (width, height), 'RGBA16F')
             # Emission and metallic have a target only in frames that draw some: without
             # it each fragment writes a sixth less (llvmpipe: ~15 % of the G-buffer), and
@@ -467,12 +473,28 @@ class Pipeline:
             t = self._sync(self.ao_fb, "ao", t)
 
         # 3. Lighting (+ debug views) into the target
-        lighting = library.get(lighting_program(snap))
+        program = lighting_program(snap)
+        lighting = library.get(program)
+        # NOTE: with the G-buffer's depth attached to the target (``depth_tested``), the
+        # lighting pass runs only where a surface is (its triangle lies on the far plane:
+        # depth test GREATER), and a trivial program gives the background its colour (LESS
+        # or EQUAL): llvmpipe skips the shading of pixel blocks that fail an early depth
+        # test, so sky pixels stop paying for the whole lighting shader. The debug views
+        # draw the shadow map over the background too, so they keep the plain pass.
+        depth_tested = depth_tested and not program.endswith("_debug")
 
         def light_pass():
             gpu.state.viewport_set(0, 0, width, height)
-            gpu.state.depth_test_set('NONE')
             gpu.state.depth_mask_set(False)
+            if depth_tested:
+                background = library.get("background")
+                gpu.state.depth_test_set('LESS_EQUAL')
+                background.bind()
+                background.uniform_block("frame", frame_ubo)
+                self._gpu_call(self._fullscreen_batch().draw, background)
+                gpu.state.depth_test_set('GREATER')
+            else:
+                gpu.state.depth_test_set('NONE')
             lighting.bind()
             lighting.uniform_block("frame", frame_ubo)
             lighting.uniform_sampler("gbuffer_albedo", albedo)
@@ -483,6 +505,7 @@ class Pipeline:
                                      white if ambient_occlusion is None else ambient_occlusion)
             lighting.uniform_sampler("gbuffer_emission", emission)
             self._gpu_call(self._fullscreen_batch().draw, lighting)
+            gpu.state.depth_test_set('NONE')
             if overlays and plan.frozen_camera is not None:
                 self._draw_frozen(snap, plan)
 
@@ -816,11 +839,11 @@ class Pipeline:
             return self.draw(snap, cache, None, width, height)
         blend = gpu.state.blend_get() if hasattr(gpu.state, "blend_get") else 'NONE'
         lit = self._texture("lit", (width, height), 'RGBA16F')
-        lit_fb = self._framebuffer("lit", colors=(lit,))
-        with lit_fb.bind():
-            self._gpu_call(lit_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
+        lit_fb = self._framebuffer("lit", depth=self.gbuffer_depth_texture(width, height),
+                                   colors=(lit,))
         gpu.state.blend_set('NONE')
-        plan = self.draw(snap, cache, lit_fb, width, height, overlays=False)
+        plan = self.draw(snap, cache, lit_fb, width, height, overlays=False,
+                         depth_tested=True)
         t = time.perf_counter()
         shader = shaders.LIBRARY.get("fxaa")
         gpu.state.viewport_set(0, 0, width, height)
@@ -843,11 +866,11 @@ class Pipeline:
         from ..core.antialiasing import jittered, sample_offsets
         width, height = snap.camera.width, snap.camera.height
         lit = self._texture("lit_final", (width, height), 'RGBA32F')
-        first_fb = self._framebuffer("lit_first", colors=(lit, aux))
-        with first_fb.bind():
-            self._gpu_call(first_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
+        depth = self.gbuffer_depth_texture(width, height)
+        first_fb = self._framebuffer("lit_first", depth=depth, colors=(lit, aux))
         started = time.perf_counter()
-        plan = self.draw(snap, cache, first_fb, width, height, overlays=False)
+        plan = self.draw(snap, cache, first_fb, width, height, overlays=False,
+                         depth_tested=True)
         timings = dict(self.timings)
         color_fb = self._framebuffer("final_color_only", colors=(color,))
         t = time.perf_counter()
@@ -864,7 +887,7 @@ class Pipeline:
         spare = self._texture("accumulate", (width, height), 'RGBA32F')
         spare_fb = self._framebuffer("accumulate", colors=(spare,))
         scratch_aux = self._texture("lit_aux_scratch", (width, height), 'RGBA32F')
-        sample_fb = self._framebuffer("lit_sample", colors=(lit, scratch_aux))
+        sample_fb = self._framebuffer("lit_sample", depth=depth, colors=(lit, scratch_aux))
         self._fullscreen_pass("accumulate", color_fb, width, height,
                               (("previous", lit), ("current", lit)), (("sample_share", 1.0),))
         accumulating = time.perf_counter() - t
@@ -875,9 +898,8 @@ class Pipeline:
             for index, (offset, weight) in enumerate(zip(offsets[1:], weights[1:]), start=1):
                 snap.camera = jittered(camera, offset)
                 snap.sample_index = index
-                with sample_fb.bind():
-                    self._gpu_call(sample_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
-                self.draw(snap, cache, sample_fb, width, height, plan=plan, overlays=False)
+                self.draw(snap, cache, sample_fb, width, height, plan=plan, overlays=False,
+                          depth_tested=True)
                 for name, value in self.timings.items():
                     if name != "total":
                         timings[name] = timings.get(name, 0.0) + value
@@ -928,14 +950,15 @@ class Pipeline:
             reads = dict(reads, aux=4)
         color = self._texture("final_color", (width, height), 'RGBA32F')
         aux = self._texture("final_aux", (width, height), 'RGBA32F')
-        target = self._framebuffer("final", colors=(color, aux))
+        target = self._framebuffer("final", depth=self.gbuffer_depth_texture(width, height),
+                                   colors=(color, aux))
         self._combined_fb = None
         with target.bind():
             target.clear(color=(0.0, 0.0, 0.0, 0.0))
         samples = max(int(getattr(snap.settings, "render_samples", 1)), 1)
         use_fxaa = samples == 1 and bool(getattr(snap.settings, "fxaa", False))
         if samples == 1 and not use_fxaa:
-            plan = self.draw(snap, cache, target, width, height)
+            plan = self.draw(snap, cache, target, width, height, depth_tested=True)
         else:
             plan = self._draw_antialiased(snap, cache, samples, use_fxaa, color, aux)
         combined_fb = self._combined_fb

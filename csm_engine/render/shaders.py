@@ -69,6 +69,15 @@ PROGRAMS = {
         frame=True,
         outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
     ),
+    "background": dict(
+        vertex="fullscreen_vert.glsl", fragment="background_frag.glsl",
+        inputs=(("pos", "VEC2"),),
+        interface=(("screen_uv", "VEC2", "smooth"),),
+        push=(),
+        samplers=(),
+        frame=True,
+        outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
+    ),
     "fxaa": dict(
         vertex="fullscreen_vert.glsl", fragment="fxaa_frag.glsl",
         inputs=(("pos", "VEC2"),),
