@@ -186,23 +186,7 @@ def _eevee_id():
 
 def _saved_render(scene, folder, name):
     """Blender's last render result as linear float RGBA, rows top first (via OpenEXR)."""
-    import bpy
-    path = os.path.join(folder, f"{name}.exr")
-    settings = scene.render.image_settings
-    if hasattr(settings, "media_type"):
-        settings.media_type = 'IMAGE'
-    settings.file_format = 'OPEN_EXR'
-    settings.color_depth = '32'
-    settings.color_mode = 'RGBA'
-    bpy.data.images["Render Result"].save_render(filepath=path, scene=scene)
-    image = bpy.data.images.load(path, check_existing=False)
-    try:
-        width, height = image.size
-        pixels = np.empty(width * height * 4, dtype=np.float32)
-        image.pixels.foreach_get(pixels)
-    finally:
-        bpy.data.images.remove(image)
-    return pixels.reshape(height, width, 4)[::-1]
+    return report_io.saved_render(scene, os.path.join(folder, f"{name}.exr"))[::-1]
 
 
 def render(scene, engine, folder, samples):

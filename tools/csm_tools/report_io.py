@@ -142,3 +142,26 @@ def read_png(path):
         samples = samples.reshape(height, -1, 2).astype(np.uint16)
         samples = samples[..., 0] * 256 + samples[..., 1]
     return samples.reshape(height, width, channels)
+
+
+def saved_render(scene, path):
+    """Blender's last render result ("Render Result") as linear float RGBA (H, W, 4), rows
+    bottom first as Blender keeps them, through a 32-bit OpenEXR file written to ``path``
+    (OpenEXR keeps scene-linear values; Python cannot read the Render Result's pixels
+    directly). Shared by the reports and the tests that compare with EEVEE or Cycles."""
+    import bpy
+    settings = scene.render.image_settings
+    if hasattr(settings, "media_type"):      # 5.0: image, multilayer image or video
+        settings.media_type = 'IMAGE'
+    settings.file_format = 'OPEN_EXR'
+    settings.color_depth = '32'
+    settings.color_mode = 'RGBA'
+    bpy.data.images["Render Result"].save_render(filepath=path, scene=scene)
+    image = bpy.data.images.load(path, check_existing=False)
+    try:
+        width, height = image.size
+        pixels = np.empty(width * height * 4, dtype=np.float32)
+        image.pixels.foreach_get(pixels)
+    finally:
+        bpy.data.images.remove(image)
+    return pixels.reshape(height, width, 4)

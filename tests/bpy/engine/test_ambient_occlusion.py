@@ -13,6 +13,7 @@ import os
 import bpy
 import numpy as np
 import pytest
+from csm_tools.report_io import saved_render
 
 from tests.bpy.bpy_helpers import render_result
 from tests.bpy.engine.test_exposure import principled
@@ -227,19 +228,4 @@ def _render_to_exr(scene, folder):
         bpy.ops.render.render()
     finally:
         scene.render.engine = "CSM"
-    path = os.path.join(str(folder), "cycles.exr")
-    settings = scene.render.image_settings
-    if hasattr(settings, "media_type"):
-        settings.media_type = 'IMAGE'
-    settings.file_format = 'OPEN_EXR'
-    settings.color_depth = '32'
-    settings.color_mode = 'RGBA'
-    bpy.data.images["Render Result"].save_render(filepath=path, scene=scene)
-    image = bpy.data.images.load(path, check_existing=False)
-    try:
-        width, height = image.size
-        pixels = np.empty(width * height * 4, dtype=np.float32)
-        image.pixels.foreach_get(pixels)
-    finally:
-        bpy.data.images.remove(image)
-    return pixels.reshape(height, width, 4)
+    return saved_render(scene, os.path.join(str(folder), "cycles.exr"))

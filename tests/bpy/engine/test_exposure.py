@@ -16,6 +16,7 @@ import pytest
 from mathutils import Vector
 
 from csm_engine.core import paths
+from csm_tools.report_io import saved_render
 from tests.bpy.engine.test_render import set_world_color
 from tests.bpy.engine.test_shadows import add_box, add_camera, add_ground, add_sun
 
@@ -77,21 +78,7 @@ def render_eevee(scene, folder):
         bpy.ops.render.render()
     finally:
         scene.render.engine = "CSM"
-    path = os.path.join(str(folder), f"eevee_{scene.name}.exr")
-    settings = scene.render.image_settings
-    _set_if_present(settings, "media_type", 'IMAGE')
-    settings.file_format = 'OPEN_EXR'
-    settings.color_depth = '32'
-    settings.color_mode = 'RGBA'
-    bpy.data.images["Render Result"].save_render(filepath=path, scene=scene)
-    image = bpy.data.images.load(path, check_existing=False)
-    try:
-        width, height = image.size
-        pixels = np.empty(width * height * 4, dtype=np.float32)
-        image.pixels.foreach_get(pixels)
-    finally:
-        bpy.data.images.remove(image)
-    return pixels.reshape(height, width, 4)
+    return saved_render(scene, os.path.join(str(folder), f"eevee_{scene.name}.exr"))
 
 
 def _eroded(mask):
