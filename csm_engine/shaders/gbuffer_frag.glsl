@@ -5,19 +5,7 @@
  * out_depth    = view depth along the camera's forward axis (0 = background)
  * out_emission = emitted radiance rgb (W/m^2/sr, EEVEE's units), metallic */
 
-/* A stable per-pixel threshold in 0..1 for hashed alpha: the 8x8 ordered-dither (Bayer)
- * rank of the pixel, so alpha a keeps a of every 8x8 block of pixels (in 1/64 steps),
- * evenly spread, and it does not crawl while nothing moves. Must match alpha_hash in
- * shadow_frag.glsl. */
-float alpha_hash(vec2 pixel)
-{
-  ivec2 p = ivec2(floor(pixel)) & 7;
-  int x = p.x;
-  int xy = p.x ^ p.y;
-  int rank = ((xy & 1) << 5) | ((x & 1) << 4) | ((xy & 2) << 2) | ((x & 2) << 1) |
-             ((xy & 4) >> 1) | ((x & 4) >> 2);
-  return (float(rank) + 0.5) / 64.0;
-}
+#include "alpha_hash.glsl"
 
 /* Roughness -> Blinn-Phong exponent (Beckmann-style 2/r^4 - 2), clamped to 1..4096. */
 float roughness_shininess(float roughness)

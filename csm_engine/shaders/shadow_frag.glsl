@@ -1,17 +1,7 @@
 /* Shadow pass, fragment stage. Depth is written by the rasterizer; only the ALPHA_MASK
  * variant does any work (cut-outs and hashed alpha must not cast solid shadows). */
 #ifdef ALPHA_MASK
-/* Must match alpha_hash in gbuffer_frag.glsl: here one threshold per atlas texel, so a
- * 50% alpha surface fills half of every 8x8 texels and PCF turns that into half a shadow. */
-float alpha_hash(vec2 pixel)
-{
-  ivec2 p = ivec2(floor(pixel)) & 7;
-  int x = p.x;
-  int xy = p.x ^ p.y;
-  int rank = ((xy & 1) << 5) | ((x & 1) << 4) | ((xy & 2) << 2) | ((x & 2) << 1) |
-             ((xy & 4) >> 1) | ((x & 4) >> 2);
-  return (float(rank) + 0.5) / 64.0;
-}
+#include "alpha_hash.glsl"
 #endif
 
 void main()
