@@ -953,8 +953,8 @@ class Pipeline:
         target = self._framebuffer("final", depth=self.gbuffer_depth_texture(width, height),
                                    colors=(color, aux))
         self._combined_fb = None
-        with target.bind():
-            target.clear(color=(0.0, 0.0, 0.0, 0.0))
+        # No clear: every path writes every pixel of both targets (background and lighting
+        # programs between them, or a debug view, or FXAA / the sample average).
         samples = max(int(getattr(snap.settings, "render_samples", 1)), 1)
         use_fxaa = samples == 1 and bool(getattr(snap.settings, "fxaa", False))
         if samples == 1 and not use_fxaa:
