@@ -373,7 +373,9 @@ def evaluated_mesh(obj, realize):
 SELF_CONTAINED_MODIFIERS = frozenset({
     'SUBSURF', 'MIRROR', 'SOLIDIFY', 'BEVEL', 'TRIANGULATE', 'WELD', 'EDGE_SPLIT',
     'DECIMATE', 'ARRAY', 'SMOOTH', 'WEIGHTED_NORMAL', 'SCREW', 'WIREFRAME', 'SKIN',
-    'REMESH', 'MULTIRES'})
+    'REMESH'})
+# NOTE: Multires is not here: its sculpted displacements live in a mesh layer that is not a
+# generic attribute, so a sculpt stroke would not change ``_mesh_contents``.
 _ATTRIBUTE_READS = {'FLOAT': ("value", 1, np.float32), 'INT': ("value", 1, np.int32),
                     'FLOAT_VECTOR': ("vector", 3, np.float32),
                     'FLOAT2': ("vector", 2, np.float32),
@@ -413,9 +415,22 @@ def _modifier_settings(modifier):
 
 def _mesh_contents(mesh):
     """CRC-32 of every generic attribute of an original mesh (positions, corners, edges,
-    UVs, materials, sharpness, custom normals...): no evaluation, one copy each."""
-    parts = [len(mesh.vertices), len(mesh.edges), len(mesh.loops), len(mesh.polygons)]
-    for attribute in mesh.attributes:
+    UVs, materials, sharpness, creases, bevel weights...): no evaluation, one copy each.
+    None when part of what the mesh evaluates to is kept outside generic attributes, so
+    the mesh must be read at every render instead.
+
+    NOTE: before 4.0 positions, creases, bevel weights and smooth flags are not generic
+    attributes (3.x lists only UVs, colours and selection), and before 5.0 custom normals
+    are a layer of their own; 4.0 still has the mesh's Auto Smooth settings."""
+    attributes = mesh.attributes
+    if attributes.get("position") is None:
+        return None
+    if getattr(mesh, "has_custom_normals", False) and \
+            attributes.get("custom_normal") is None:
+        return None
+    parts = [len(mesh.vertices), len(mesh.edges), len(mesh.loops), len(mesh.polygons),
+             getattr(mesh, "use_auto_smooth", None), getattr(mesh, "auto_smooth_angle", None)]
+    for attribute in attributes:
         read = _ATTRIBUTE_READS.get(attribute.data_type)
         if read is None:
             return None
@@ -452,7 +467,9 @@ def recipe(obj, simplify):
     contents = _mesh_contents(mesh)
     if contents is None:
         return None
-    return (mesh.as_pointer(), contents, tuple(modifiers), simplify)
+    # No mesh identity in it: two meshes with the same contents and the same modifiers
+    # evaluate to the same mesh (Shift+D copies), so one read serves both.
+    return (contents, tuple(modifiers), simplify)
 
 
 class MeshCache:
@@ -475,7 +492,7 @@ class MeshCache:
         self.meshes = {}
         self.textures = {}
         self._geometry = {}       # check_contents: fingerprint -> GPUMesh
-        self._recipes = {}        # check_contents: key -> (recipe, fingerprint)
+        self._recipes = {}        # check_contents: (recipe, slots, tangents) -> key
         self._older = {}          # check_contents: the previous sync's unused geometry
         self._dirty = set()
         self._materials_dirty = False
@@ -551,12 +568,16 @@ class MeshCache:
             # Subdivision modifier runs when ``data`` is first read: ~80 ms a Suzanne at
             # level 2 here), so a mesh whose inputs are unchanged is not read at all.
             made_of = recipe(obj, simplify) if not self.realize else None
-            previous = self._recipes.get(key)
-            if made_of is not None and previous is not None and previous[0] == made_of \
-                    and previous[1] in self._geometry and previous[1][2] == tangents:
-                known = self._geometry[previous[1]]
-                geometry[previous[1]] = known
-                recipes[key] = previous
+            made_key = (made_of, len(materials), tangents) if made_of is not None else None
+            # The same inputs make the same mesh: read once in this render (Shift+D copies,
+            # objects sharing a mesh) and not at all when the render before read it.
+            key_hash = None if made_key is None else \
+                recipes.get(made_key) or self._recipes.get(made_key)
+            known = None if key_hash is None else \
+                geometry.get(key_hash) or self._geometry.get(key_hash)
+            if known is not None:
+                geometry[key_hash] = known
+                recipes[made_key] = key_hash
                 stats["unread"] += 1
                 meshes[key] = dataclasses.replace(known, materials=materials)
                 continue
@@ -587,8 +608,8 @@ class MeshCache:
                 else:
                     known, key_hash = known
                     stats["reused"] += 1
-                if made_of is not None:
-                    recipes[key] = (made_of, key_hash)
+                if made_key is not None:
+                    recipes[made_key] = key_hash
             meshes[key] = dataclasses.replace(known, materials=materials)
         # Geometry no object uses any more is dropped here, inside the render.
         # The render before's meshes stay one more render (an edit undone, an animation

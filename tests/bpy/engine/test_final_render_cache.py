@@ -153,3 +153,59 @@ def test_objects_sharing_a_mesh_upload_it_once(empty_scene):
     engine._final_mesh_cache().clear()
     _, uploads = _render(scene)
     assert uploads == 2                      # the plane and one subdivided cube
+    assert engine._final_mesh_cache().last_sync["read"] == 2
+
+
+def _copies(scene, cube, count):
+    """``count`` Shift+D-style copies of the cube: each its own copy of the mesh."""
+    copies = []
+    for index in range(count):
+        twin = cube.copy()
+        twin.data = cube.data.copy()
+        twin.location = (-3.0 + 3.0 * index, 3.5, 1.2)
+        scene.collection.objects.link(twin)
+        copies.append(twin)
+    return copies
+
+
+def test_copies_of_one_mesh_are_read_once_and_an_edited_copy_on_its_own(empty_scene):
+    """Copies with the same contents and modifiers evaluate to one mesh, so a first render
+    reads (and Blender subdivides) it once; a copy that differs in anything that shapes it
+    (subdivision level, an edge crease, flat shading, a moved vertex) is read by itself,
+    in that render and in the next, and its pixels change."""
+    scene, cube = _scene(empty_scene)
+    copies = _copies(scene, cube, 3)
+    engine._final_mesh_cache().clear()
+    base, uploads = _render(scene)
+    cache = engine._final_mesh_cache()
+    assert cache.last_sync["read"] == 2 and uploads == 2        # plane + one cube
+    assert cache.last_sync["unread"] == 3
+
+    edits = [lambda: setattr(copies[0].modifiers["subdivide"], "render_levels", 3),
+             lambda: copies[1].data.polygons.foreach_set(
+                 "use_smooth", [not copies[1].data.polygons[0].use_smooth] *
+                 len(copies[1].data.polygons))]
+    if bpy.app.version >= (4, 0, 0):          # creases became an edge attribute in 4.0
+        def crease():
+            mesh = copies[2].data
+            layer = mesh.attributes.get("crease_edge") or \
+                mesh.attributes.new("crease_edge", 'FLOAT', 'EDGE')
+            layer.data.foreach_set("value", [1.0] * len(mesh.edges))
+            mesh.update()
+        edits.append(crease)
+    previous = base
+    for edit in edits:
+        edit()
+        after, uploads = _render(scene)
+        assert uploads == 1, edit
+        assert _changed(previous, after) > 0.02
+        again, uploads = _render(scene)
+        assert uploads == 0 and _changed(after, again) == 0.0
+        assert cache.last_sync["read"] == 0
+        previous = after
+    # Moving a vertex of the original (the copies keep theirs) re-reads only the original.
+    top = max(cube.data.vertices, key=lambda v: v.co.z)
+    top.co.z += 1.5
+    cube.data.update()
+    moved, uploads = _render(scene)
+    assert uploads == 1 and _changed(previous, moved) > 0.1
