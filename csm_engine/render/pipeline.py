@@ -29,6 +29,7 @@ from ..core.camera import world_positions
 from ..core.shadow_plan import (CASCADE_LINE_COLORS, depth_blocks_from_reduction,
                                 front_to_back, gbuffer_plan, instance_bounds,
                                 layout_atlas, pack_frame, plan_shadows)
+from ..core.frame_layout import _BASIC, FRAME_LAYOUT
 from ..core.material_layout import pack_material
 from . import shaders
 from .gpu_mesh import MaterialInfo
@@ -49,6 +50,8 @@ def _column_major_stack(matrices):
 # Shadow tiles drawn and skipped in this process (a tile is skipped when its light matrix,
 # casters and their geometry are those it already holds); read by tests and the benchmark.
 SHADOW_TILES = {"drawn": 0, "skipped": 0}
+# G-buffers drawn, and kept because the frame before drew the same (tests read this).
+GBUFFERS = {"drawn": 0, "kept": 0}
 
 _BYTES_PER_TEXEL = {'RGBA32F': 16, 'RGBA16F': 8, 'R32F': 4, 'DEPTH_COMPONENT32F': 4,
                     'RGBA8': 4}
@@ -68,6 +71,24 @@ def _same_tile(held, signature):
     a, b = held[3], signature[3]
     return bool(np.array_equal(a[(0, 1, 3), :], b[(0, 1, 3), :])
                 and np.abs(a[2] - b[2]).max() <= TILE_DEPTH_TOLERANCE)
+
+
+# What the G-buffer programs read of the frame block (gbuffer_vert/frag.glsl), and what
+# the AO passes read besides the G-buffer (ao_frag.glsl).
+_GBUFFER_FRAME_FIELDS = ("clip_from_world", "camera_position", "camera_forward",
+                         "sample_index")
+_AO_FRAME_FIELDS = ("ao_enabled", "ao_distance", "ao_strength", "ao_pixels_per_unit",
+                    "ao_view_ray", "is_perspective", "viewport_size", "view_from_world")
+
+
+def _frame_bytes(frame_data, names):
+    """The bytes of some single fields of a packed frame block, to compare frames by."""
+    parts = []
+    for name in names:
+        field = FRAME_LAYOUT.field(name)
+        size = _BASIC[field.kind][2]
+        parts.append(frame_data[field.offset // 4:(field.offset + size) // 4].tobytes())
+    return b"".join(parts)
 
 
 def _same_textures(cache, textures):
@@ -116,19 +137,21 @@ _DEFAULT_MATERIAL = MaterialInfo()
 
 class _DrawMaterial:
     """One material slot ready to draw: its uniform buffer, its four textures (white where
-    there is none, see _MATERIAL_SAMPLERS), alpha and shadow modes, culling, and the key a
-    shadow tile records of it."""
+    there is none, see _MATERIAL_SAMPLERS), alpha and shadow modes, culling, and the keys a
+    shadow tile and a kept G-buffer record of it."""
     __slots__ = ("block", "textures", "textured", "writes_emission", "alpha_mode",
-                 "shadow_mode", "backface_culling", "backface_culling_shadow", "shadow_key")
+                 "shadow_mode", "backface_culling", "backface_culling_shadow", "shadow_key",
+                 "gbuffer_key")
 
     def __init__(self, block, textures, textured, writes_emission, alpha_mode, shadow_mode,
-                 backface_culling, backface_culling_shadow, shadow_key):
+                 backface_culling, backface_culling_shadow, shadow_key, gbuffer_key):
         self.block, self.textures, self.textured = block, textures, textured
         self.writes_emission = writes_emission
         self.alpha_mode, self.shadow_mode = alpha_mode, shadow_mode
         self.backface_culling = backface_culling
         self.backface_culling_shadow = backface_culling_shadow
         self.shadow_key = shadow_key
+        self.gbuffer_key = gbuffer_key
 
 
 # The G-buffer's draws in order: (program, slot of the _draw_items entry, whether the mesh
@@ -195,6 +218,7 @@ class Pipeline:
         self._combined_fb = None    # what holds the final Combined image, when not "final"
         self.ao_fb = None           # the half-resolution AO of the last frame (None: AO off)
         self._zeroed_emission = None   # the emission texture last cleared to zero
+        self.gbuffer_kept = False   # this frame's G-buffer is the frame before's (see draw)
         self.shadow_tiles = {"drawn": 0, "skipped": 0}   # of the last frame
 
     # -- resources ---------------------------------------------------------------------
@@ -410,6 +434,28 @@ class Pipeline:
             # Near to far, so the early depth test skips the shading of hidden fragments.
             order = np.asarray(front_to_back(snap, bounds_lo_hi), dtype=np.int64)
             order = order[np.array([i.visible_camera for i in snap.instances], dtype=bool)[order]]
+            # A G-buffer that would come out the same as the one the targets hold is not
+            # drawn again (F12 after a shadow or light setting changed; an unchanged
+            # re-render), nor is its AO (see _ambient_occlusion).
+            targets = (albedo, normal, view_depth, emission, depth)
+            contents = self._gbuffer_contents(snap, cache, items, order, world_from_objects,
+                                              frame_data, self._zeroed_emission is None)
+            held = self._textures.get("gbuffer_contents")
+            if self.skip_gpu_calls:
+                self.gbuffer_kept = False
+                return t, (albedo, normal, view_depth, emission, gbuffer_fb)
+            if contents is not None and held is not None and held[1] == contents and \
+                    all(a is b for a, b in zip(held[0], targets)):
+                GBUFFERS["kept"] += 1
+                self.gbuffer_kept = True
+                t = self._sync(gbuffer_fb, "gbuffer", t)
+                return t, (albedo, normal, view_depth, emission, gbuffer_fb)
+            # Forget what the targets held while they are redrawn (if drawing raises, the
+            # next frame draws again), and what was computed from them.
+            for name in ("gbuffer_contents", "ao_contents", "depth_blocks"):
+                self._textures.pop(name, None)
+            GBUFFERS["drawn"] += 1
+            self.gbuffer_kept = False
             with gbuffer_fb.bind():
                 gpu.state.viewport_set(0, 0, width, height)
                 self._gpu_call(gbuffer_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
@@ -446,6 +492,8 @@ class Pipeline:
                             self._gpu_call(batch.draw, gbuffer)
                 gpu.state.face_culling_set('NONE')
                 gpu.state.depth_test_set('NONE')
+            if contents is not None:
+                self._textures["gbuffer_contents"] = (targets, contents)
             t = self._sync(gbuffer_fb, "gbuffer", t)
             return t, (albedo, normal, view_depth, emission, gbuffer_fb)
 
@@ -454,7 +502,11 @@ class Pipeline:
             # Sample-distribution shadow maps: the G-buffer first, its nearest and farthest
             # view depth, then cascades fitted to that range, then their shadow maps.
             t, gbuffer = gbuffer_pass(t)
-            blocks = self._visible_depth_blocks(gbuffer[2], width, height)
+            blocks = self._textures.get("depth_blocks") if self.gbuffer_kept else None
+            if blocks is None:
+                blocks = self._visible_depth_blocks(gbuffer[2], width, height)
+                if blocks is not None:
+                    self._textures["depth_blocks"] = blocks
             t = self._sync(gbuffer[4], "depth_range", t)
             plan = plan_shadows(snap, bounds, blocks)
             self.warnings.extend(w for w in plan.warnings if w not in self.warnings)
@@ -467,8 +519,8 @@ class Pipeline:
         albedo, normal, view_depth, emission, gbuffer_fb = gbuffer
 
         # 2b. Ambient occlusion: skipped, with no texture allocated, when it is off.
-        ambient_occlusion = self._ambient_occlusion(snap, frame_ubo, view_depth, normal,
-                                                    width, height)
+        ambient_occlusion = self._ambient_occlusion(snap, frame_ubo, frame_data, view_depth,
+                                                    normal, width, height)
         if ambient_occlusion is not None:
             t = self._sync(self.ao_fb, "ao", t)
 
@@ -519,12 +571,14 @@ class Pipeline:
         self.timings["total"] = time.perf_counter() - start
         return plan
 
-    def _ambient_occlusion(self, snap, frame_ubo, view_depth, normal, width, height):
+    def _ambient_occlusion(self, snap, frame_ubo, frame_data, view_depth, normal, width,
+                           height):
         """The AO pass (ao_frag.glsl): the horizon search, then the depth-aware blur, both at
         half resolution. Returns the blurred texture (AO: 1 = open, 0 = occluded; and the
         view depth it stands for), which the lighting pass brings to full resolution; or
         None when AO is off or its strength is 0, in which case no AO texture is allocated
-        and the lighting pass ignores its sampler."""
+        and the lighting pass ignores its sampler. With the G-buffer kept from the frame
+        before (``gbuffer_kept``) and the same AO settings, the AO drawn then is kept too."""
         import gpu
         self.ao_fb = None
         settings = snap.settings
@@ -538,6 +592,13 @@ class Pipeline:
         search_fb = self._framebuffer("ao_half", colors=(search,))
         blurred_fb = self._framebuffer("ao", colors=(blurred,))
         library = shaders.LIBRARY
+        inputs = (id(library), library.generation, _frame_bytes(frame_data, _AO_FRAME_FIELDS))
+        held = self._textures.get("ao_contents")
+        if self.gbuffer_kept and held is not None and held[0] is blurred and \
+                held[1] == inputs:
+            self.ao_fb = blurred_fb
+            return blurred
+        self._textures.pop("ao_contents", None)
         for program, fb, extra in (("ao", search_fb, ()),
                                    ("ao_blur", blurred_fb, (("ao_half", search),))):
             shader = library.get(program)
@@ -554,6 +615,8 @@ class Pipeline:
                     shader.uniform_sampler(name, texture)
                 self._gpu_call(self._fullscreen_batch().draw, shader)
         self.ao_fb = blurred_fb
+        if not self.skip_gpu_calls:
+            self._textures["ao_contents"] = (blurred, inputs)
         return blurred
 
     def _draw_casters(self, library, items, world_from_objects, tile, visible, mirrored,
@@ -639,6 +702,37 @@ class Pipeline:
             signatures.append(per_key[instance.key])
         self._held_signatures = kept
         return signatures
+
+    def _gbuffer_contents(self, snap, cache, items, order, world_from_objects, frame_data,
+                          writes_emission):
+        """What a G-buffer drawn now would hold, as a value to compare with the one the
+        targets hold: the programs, camera and sample, which instances in which order at
+        which matrices, each one's geometry (``GPUMesh.serial``) and material inputs. None
+        when a draw reads an image (its pixels may have changed in place). In the viewport
+        the camera is looked at first, so a redraw of a moving view pays for little else
+        (its record holds only the camera, which the next redraw of that view completes)."""
+        library = shaders.LIBRARY
+        library.get("gbuffer")        # compiled now, so the generation is the one drawn with
+        camera = (id(library), library.generation, writes_emission,
+                  _frame_bytes(frame_data, _GBUFFER_FRAME_FIELDS))
+        held = self._textures.get("gbuffer_contents")
+        if snap.is_viewport and (held is None or held[1][0] != camera):
+            return (camera,)
+        per_entry = {}
+        draws = []
+        instances = snap.instances
+        for index in order.tolist():
+            entry = items[index]
+            known = per_entry.get(id(entry))
+            if known is None:
+                mesh = cache.meshes.get(instances[index].key)
+                keys = tuple(material.gbuffer_key
+                             for _batch, material in entry[0] + entry[1] + entry[5])
+                if None in keys:
+                    return None
+                known = per_entry[id(entry)] = (mesh.serial if mesh is not None else 0, keys)
+            draws.append(known)
+        return (camera, order.tobytes(), world_from_objects[order].tobytes(), tuple(draws))
 
     def _gpu_call(self, call, *args, **kwargs):
         """Every draw and clear of a frame goes through here, so that the benchmark can
@@ -737,7 +831,8 @@ class Pipeline:
                 "surface_convention": material.surface_convention,
                 "roughness_channel": material.roughness_channel if loaded[3] else -1,
                 "metallic_channel": material.metallic_channel if loaded[3] else -1})
-            held = (loaded, gpu.types.GPUUniformBuf(block.tobytes()), shadow_alpha)
+            held = (loaded, gpu.types.GPUUniformBuf(block.tobytes()), shadow_alpha,
+                    block.tobytes())
             material.gpu_block = held
         # What a shadow tile drawn with this material depends on; None when it reads an
         # image, which may have been edited in place.
@@ -748,10 +843,14 @@ class Pipeline:
         writes_emission = bool(loaded[2] or max(material.emission) > 0.0 or
                                material.metallic > 0.0 or
                                (loaded[3] and material.metallic_channel >= 0))
+        # What a G-buffer drawn with this material depends on; None when it reads an
+        # image (painted or reloaded in place, it keeps its name and texture).
+        gbuffer_key = None if any(loaded) else \
+            (held[3], material.alpha_mode, material.backface_culling)
         return _DrawMaterial(held[1], tuple(t or white for t in textures), any(loaded),
                              writes_emission, material.alpha_mode, material.shadow_mode,
                              material.backface_culling, material.backface_culling_shadow,
-                             shadow_key)
+                             shadow_key, gbuffer_key)
 
     def _draw_frozen(self, snap, plan):
         """Draw each frozen cascade's light-space box as coloured lines."""

@@ -62,13 +62,15 @@ def subdivided_monkey(level, live=False):
     return obj
 
 
-def build_field_scene(monkeys, level=2, share_mesh=False, live=False):
+def build_field_scene(monkeys, level=2, share_mesh=False, live=False, distinct=False):
     """Suzannes on a square grid over a ground plane, a sun and a camera seeing them all.
 
     Deterministic: positions and rotations come from the grid index only. With
     ``share_mesh`` every monkey links one mesh (scaling sweeps); otherwise each has its own
     copy, like separately modelled objects, so editing one uploads one. With ``live`` the
-    Subdivision modifier stays on every object (not applied).
+    Subdivision modifier stays on every object (not applied). With ``distinct`` each copy
+    has one vertex moved by a millimetre per index, so no two meshes are the same (a
+    final render cannot read one for all).
     """
     import bpy
     from csm_engine.blender import cli
@@ -80,6 +82,8 @@ def build_field_scene(monkeys, level=2, share_mesh=False, live=False):
     objects = [template]
     for index in range(1, monkeys):
         data = template.data if share_mesh else template.data.copy()
+        if distinct and not share_mesh:
+            data.vertices[0].co.z += 0.001 * index
         obj = bpy.data.objects.new(f"Suzanne.{index:04d}", data)
         if live:
             modifier = obj.modifiers.new("subdivide", 'SUBSURF')

@@ -78,6 +78,8 @@ def test_live_modifier_scene_reports_first_and_repeated_renders_and_animation(tm
     for scene in results["scenes"]:
         # The first render reads every mesh; the repeated ones are the median that follows.
         assert scene["csm"]["warmup_s"] > 0 and scene["first_ratio"] > 0
+        # Tuning shadows: F12 after the sun turned is timed too.
+        assert scene["csm"]["sun_turned_s"] > 0
         assert scene["viewport"]["camera_only_uploads"] == 0
     animation = results["animation"]
     assert animation["frames"] >= 2 and len(animation["csm"]["frames_s"]) == \
