@@ -1,8 +1,9 @@
 """Mesh and material data on the GPU.
 
 Owns the evaluated-mesh -> numpy -> ``GPUBatch`` path and its cache. Every corner (loop) of
-a mesh becomes one vertex (position, split normal, UV), so flat-shaded voxels and UV seams
-come out right; triangles are grouped into one index buffer per material slot. Meshes
+a mesh is read with its own split normal and UV, so flat-shaded voxels and UV seams come
+out right; corners of one vertex that agree share one GPU vertex (core/vertex_sharing.py);
+triangles are grouped into one index buffer per material slot. Meshes
 whose materials use a normal map also carry a tangent per corner (``corner_tangents``).
 Materials are read once per sync into ``MaterialInfo`` (``material_info``: what is read and
 what is not is listed in docs/materials.md).
@@ -18,6 +19,7 @@ import zlib
 
 import numpy as np
 
+from ..core.vertex_sharing import share_vertices
 from ..render.gpu_mesh import MaterialInfo, upload
 from . import compat
 
@@ -335,14 +337,20 @@ def extract_arrays(mesh, raw=None):
 
 
 def _upload_mesh(mesh, materials, raw=None):
-    """Read and upload one evaluated mesh; tangents only when a material needs them."""
-    arrays = extract_arrays(mesh, raw)
+    """Read and upload one evaluated mesh; tangents only when a material needs them.
+    Corners of one vertex with the same normal, UV and tangent share one GPU vertex
+    (``share_vertices``): a smooth mesh uploads one per vertex, not one per corner."""
+    raw = read_arrays(mesh) if raw is None else raw
+    positions, normals, uvs, triangles, material_index, bounds = extract_arrays(mesh, raw)
     uv_name = tangent_uv(materials)
     tangents = None
     if uv_name is not None:
-        positions, normals, uvs, triangles = arrays[:4]
         tangents = corner_tangents(mesh, uv_name, positions, normals, uvs, triangles)
-    return upload(*arrays, materials, tangents=tangents)
+    first, vertex_of_corner = share_vertices(raw["corner_verts"], len(raw["coords"]),
+                                             (normals, uvs, tangents))
+    return upload(positions[first], normals[first], uvs[first], vertex_of_corner[triangles],
+                  material_index, bounds, materials,
+                  tangents=None if tangents is None else tangents[first])
 
 
 @contextlib.contextmanager

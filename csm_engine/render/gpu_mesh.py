@@ -16,7 +16,7 @@ UPLOADS = {"count": 0, "bytes": 0}
 # Serial number of the next upload: a GPUMesh's ``serial`` names its geometry, so a shadow
 # tile drawn from the same serials, matrices and light matrix need not be drawn again.
 _NEXT_SERIAL = [1]
-BYTES_PER_CORNER = 32       # position + normal + uv, float32 (see _vertex_format)
+BYTES_PER_CORNER = 32       # a GPU vertex: position + normal + uv, float32 (see _vertex_format)
 BYTES_PER_TANGENT = 16      # tangent xyz + bitangent sign, float32, normal-mapped meshes only
 BYTES_PER_TRIANGLE = 12     # three int32 indices
 

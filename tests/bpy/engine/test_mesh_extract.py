@@ -82,3 +82,56 @@ def test_single_material_mesh_has_slot_zero_everywhere():
     assert len(arrays[4]) == triangle_count == 968
     assert not arrays[4].any()
     assert np.array_equal(arrays[3], reference[2])
+
+
+def test_shared_vertices_draw_the_same_pixels_as_one_vertex_per_corner(empty_scene,
+                                                                        monkeypatch):
+    """Smooth, flat, UV-seamed, normal-mapped and mirrored meshes: sharing GPU vertices
+    between agreeing corners changes no pixel, and a smooth sphere uploads one vertex per
+    mesh vertex (not one per corner)."""
+    from csm_engine.blender import engine
+    from csm_engine.core import vertex_sharing
+    from csm_engine.render import gpu_mesh
+    from tests.bpy.bpy_helpers import render_result
+    from tests.bpy.engine.test_materials import normal_mapped_material
+    scene = empty_scene
+    bpy.ops.mesh.primitive_plane_add(size=14)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=32, ring_count=16, location=(-2, 0, 1.2))
+    sphere = bpy.context.object
+    if hasattr(sphere.data, "shade_smooth"):
+        sphere.data.shade_smooth()
+    else:
+        for polygon in sphere.data.polygons:
+            polygon.use_smooth = True
+    bpy.ops.mesh.primitive_cube_add(location=(1.5, 0, 1.0))          # flat, UV seams
+    bpy.ops.mesh.primitive_monkey_add(location=(0, 2.5, 1.2))
+    monkey = bpy.context.object
+    monkey.scale.x = -1.0                                             # mirrored
+    monkey.data.materials.append(normal_mapped_material("bumpy", 15))  # tangents
+    bpy.ops.object.light_add(type='SUN', rotation=(np.radians(40), np.radians(20), 0))
+    bpy.ops.object.camera_add(location=(8, -8, 6), rotation=(np.radians(60), 0,
+                                                              np.radians(45)))
+    scene.camera = bpy.context.object
+
+    engine.forget_final_render_meshes()
+    before = gpu_mesh.UPLOADS["bytes"]
+    shared = render_result(scene, 160, 120).images["combined"].copy()
+    shared_bytes = gpu_mesh.UPLOADS["bytes"] - before
+
+    def one_per_corner(corner_verts, vertex_count, corner_arrays):
+        corners = np.arange(len(corner_verts))
+        return corners, corners
+    monkeypatch.setattr(mesh_cache, "share_vertices", one_per_corner)
+    engine.forget_final_render_meshes()
+    before = gpu_mesh.UPLOADS["bytes"]
+    per_corner = render_result(scene, 160, 120).images["combined"]
+    per_corner_bytes = gpu_mesh.UPLOADS["bytes"] - before
+    assert np.array_equal(shared, per_corner)
+    assert shared_bytes < 0.8 * per_corner_bytes     # flat cube and monkey keep theirs
+
+    mesh = sphere.data
+    first, _ = vertex_sharing.share_vertices(
+        mesh_cache.read_arrays(mesh)["corner_verts"], len(mesh.vertices),
+        (mesh_cache.read_arrays(mesh)["normals"], mesh_cache.read_arrays(mesh)["uvs"]))
+    # The UV sphere's one seam (and its poles' UVs) keep a few corners apart.
+    assert len(first) < 1.3 * len(mesh.vertices) < 0.4 * len(mesh.loops)
