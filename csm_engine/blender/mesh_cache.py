@@ -393,10 +393,46 @@ _ATTRIBUTE_READS = {'FLOAT': ("value", 1, np.float32), 'INT': ("value", 1, np.in
                     'INT32_2D': ("value", 2, np.int32)}
 
 
-def _animated(id_block):
+# What an object's animation may key without changing its evaluated mesh.
+_TRANSFORM_PATHS = frozenset({
+    "location", "rotation_euler", "rotation_quaternion", "rotation_axis_angle", "scale",
+    "delta_location", "delta_rotation_euler", "delta_rotation_quaternion", "delta_scale",
+    "hide_render", "hide_viewport"})
+
+
+def _action_paths(data):
+    """The data paths the action of an AnimData keys, or None when they cannot be read.
+    5.0 keeps F-curves in the action's slot's channel bag (4.4+ layered actions);
+    before 4.4 they are ``action.fcurves``."""
+    action = data.action
+    slot = getattr(data, "action_slot", None)
+    if slot is not None:
+        try:
+            from bpy_extras.anim_utils import action_get_channelbag_for_slot
+        except ImportError:
+            action_get_channelbag_for_slot = None
+        if action_get_channelbag_for_slot is not None:
+            bag = action_get_channelbag_for_slot(action, slot)
+            return [] if bag is None else [curve.data_path for curve in bag.fcurves]
+    fcurves = getattr(action, "fcurves", None)
+    return None if fcurves is None else [curve.data_path for curve in fcurves]
+
+
+def _animated(id_block, transform_only_ok=False):
+    """Whether ``id_block`` is animated (an action, drivers or NLA tracks). With
+    ``transform_only_ok`` an action that keys only the transform (and visibility) does
+    not count: it moves the object, it does not change its mesh."""
     data = getattr(id_block, "animation_data", None) if id_block is not None else None
-    return data is not None and (data.action is not None or len(data.drivers) > 0
-                                 or len(getattr(data, "nla_tracks", ())) > 0)
+    if data is None:
+        return False
+    if len(data.drivers) > 0 or len(getattr(data, "nla_tracks", ())) > 0:
+        return True
+    if data.action is None:
+        return False
+    if not transform_only_ok:
+        return True
+    paths = _action_paths(data)
+    return paths is None or any(path not in _TRANSFORM_PATHS for path in paths)
 
 
 def _modifier_settings(modifier):
@@ -459,7 +495,8 @@ def recipe(obj, simplify):
     mesh = original.data
     if original.type != 'MESH' or mesh is None or getattr(mesh, "attributes", None) is None:
         return None
-    if getattr(mesh, "shape_keys", None) is not None or _animated(original) or \
+    if getattr(mesh, "shape_keys", None) is not None or \
+            _animated(original, transform_only_ok=True) or \
             _animated(mesh) or getattr(original, "particle_systems", None):
         return None
     modifiers = []

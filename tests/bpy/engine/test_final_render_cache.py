@@ -209,3 +209,31 @@ def test_copies_of_one_mesh_are_read_once_and_an_edited_copy_on_its_own(empty_sc
     cube.data.update()
     moved, uploads = _render(scene)
     assert uploads == 1 and _changed(previous, moved) > 0.1
+
+
+def test_a_moving_object_is_not_read_again_but_an_animated_modifier_is(empty_scene):
+    """Keys on the transform move the object without changing its mesh, so its Subdivision
+    is not redone per frame; a keyed modifier setting changes the mesh, so it is read."""
+    scene, cube = _scene(empty_scene)
+    cube.location.z = 1.2
+    cube.keyframe_insert("location", frame=1)
+    cube.location.z = 3.0
+    cube.keyframe_insert("location", frame=5)
+    scene.frame_set(1)
+    low, _ = _render(scene)
+    scene.frame_set(5)
+    high, uploads = _render(scene)
+    cache = engine._final_mesh_cache()
+    assert uploads == 0 and cache.last_sync["read"] == 0
+    assert _changed(low, high) > 0.1
+    subsurf = cube.modifiers["subdivide"]
+    subsurf.render_levels = 0
+    subsurf.keyframe_insert("render_levels", frame=1)
+    subsurf.render_levels = 3
+    subsurf.keyframe_insert("render_levels", frame=5)
+    scene.frame_set(1)
+    coarse, _ = _render(scene)
+    scene.frame_set(5)
+    fine, uploads = _render(scene)
+    assert cache.last_sync["read"] >= 1 and uploads == 1
+    assert _changed(high, fine) > 0.02
