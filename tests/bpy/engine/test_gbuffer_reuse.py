@@ -186,3 +186,59 @@ def test_textured_materials_never_keep_the_gbuffer(empty_scene):
     blue, kept = _render(scene)
     assert not kept
     assert np.abs(blue - yellow).max() > 0.1
+
+
+def _viewport_frame(scene, renderer, cache, w=W, h=H):
+    """One viewport redraw of the scene camera's view (as view_draw does)."""
+    import gpu
+    from csm_engine.blender import snapshot
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    camera = snapshot.camera_from_scene(scene, depsgraph, w, h)
+    snap = snapshot.take(depsgraph, camera, is_viewport=True)
+    cache.sync(snap.mesh_sources)
+    snap.mesh_sources = {}
+    offscreen = gpu.types.GPUOffScreen(w, h, format='RGBA32F')
+    try:
+        with offscreen.bind():
+            fb = gpu.state.active_framebuffer_get()
+            fb.clear(color=(0, 0, 0, 0))
+            renderer.draw_viewport(snap, cache, w, h, fxaa=False)
+            buffer = gpu.types.Buffer('FLOAT', w * h * 4)
+            fb.read_color(0, 0, w, h, 4, 0, 'FLOAT', data=buffer)
+    finally:
+        offscreen.free()
+    return np.frombuffer(buffer, np.float32).reshape(h, w, 4).copy()
+
+
+def test_viewport_keeps_the_gbuffer_while_shadows_are_tuned(empty_scene):
+    """In the viewport too: the second redraw of an unmoved view records the G-buffer, a
+    PCF or sun change then keeps it and shows; a moved object draws it again. Every frame
+    equals a fresh pipeline's."""
+    from csm_engine.blender import mesh_cache
+    scene, cube, sun = _scene(empty_scene)
+    _render(scene)                        # a GPU context exists from here on
+    cache = mesh_cache.MeshCache()
+    handler = lambda _scene, depsgraph: engine.apply_depsgraph_updates(  # noqa: E731
+        cache, depsgraph.updates)
+    bpy.app.handlers.depsgraph_update_post.append(handler)
+    renderer = pipeline.Pipeline()
+    try:
+        def fresh():
+            return _viewport_frame(scene, pipeline.Pipeline(), mesh_cache.MeshCache())
+
+        _viewport_frame(scene, renderer, cache)
+        before = _viewport_frame(scene, renderer, cache)
+        for edit, keeps in ((lambda: setattr(scene.csm, "pcf_radius", 3), True),
+                            (lambda: setattr(sun, "rotation_euler",
+                                             (np.radians(50), np.radians(-30), 0)), True),
+                            (lambda: setattr(cube, "location", (1.5, 0.5, 1.2)), False)):
+            edit()
+            bpy.context.view_layer.update()
+            kept = pipeline.GBUFFERS["kept"]
+            after = _viewport_frame(scene, renderer, cache)
+            assert (pipeline.GBUFFERS["kept"] > kept) == keeps
+            assert np.abs(after - before).max() > 0.02
+            assert np.array_equal(after, fresh())
+            before = after
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(handler)
