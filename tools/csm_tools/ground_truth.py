@@ -116,6 +116,9 @@ class Comparison:
     partial_on_lit_pixels: int = 0     # ... where the engine's is < 0.999
     flat_lit_ground_pixels: int = 0    # fully lit in Cycles, normal within 1 deg of +Z
     flat_lit_ground_full_pixels: int = 0   # ... where the engine's visibility >= 0.999
+    # Of the flat lit ground short of 0.999, the pixels next to (8-neighbour of) one that
+    # Cycles shows shadowed: a shadow edge's filter reach, not a stripe or a bias.
+    flat_lit_ground_short_at_edge_pixels: int = 0
     seconds: float = 0.0           # the engine's shadows-on render, warm (wall clock)
 
     @property
@@ -156,6 +159,15 @@ class Comparison:
         return 100.0 * self.partial_on_lit_pixels / max(self.cycles_fully_lit_pixels, 1)
 
     @property
+    def flat_ground_short_at_edge_fraction(self):
+        """Of the fully lit flat ground the engine shows below 0.999, the fraction that
+        touches a pixel Cycles shows shadowed (None when none falls short)."""
+        short = self.flat_lit_ground_pixels - self.flat_lit_ground_full_pixels
+        if short <= 0:
+            return None
+        return self.flat_lit_ground_short_at_edge_pixels / short
+
+    @property
     def flat_ground_full_fraction(self):
         """Of the fully lit flat ground, the fraction the engine shows at >= 0.999 (None
         when the view has no flat ground)."""
@@ -168,7 +180,7 @@ class Comparison:
         for name in ("mismatch_percent", "false_shadow_percent", "missed_shadow_percent",
                      "shadow_lost_percent", "penumbra_width_ratio",
                      "penumbra_width_error_percent", "partial_on_lit_percent",
-                     "flat_ground_full_fraction"):
+                     "flat_ground_full_fraction", "flat_ground_short_at_edge_fraction"):
             values[name] = getattr(self, name)
         return values
 
@@ -266,8 +278,21 @@ def compare(csm_vis, cycles_vis, csm_lit, cycles_lit, also_lit=None, flat=None):
         cycles_fully_lit_pixels=int(fully_lit.sum()),
         partial_on_lit_pixels=int((fully_lit & (csm_vis < FULLY_LIT)).sum()),
         flat_lit_ground_pixels=int(flat_lit.sum()),
-        flat_lit_ground_full_pixels=int((flat_lit & (csm_vis >= FULLY_LIT)).sum()))
+        flat_lit_ground_full_pixels=int((flat_lit & (csm_vis >= FULLY_LIT)).sum()),
+        flat_lit_ground_short_at_edge_pixels=int(
+            (flat_lit & (csm_vis < FULLY_LIT) & _next_to(cycles_lit & cycles_dark)).sum()))
     return result, classes
+
+
+def _next_to(mask):
+    """``mask`` grown by one pixel in all eight directions."""
+    grown = mask.copy()
+    grown[1:] |= mask[:-1]
+    grown[:-1] |= mask[1:]
+    rows = grown.copy()
+    grown[:, 1:] |= rows[:, :-1]
+    grown[:, :-1] |= rows[:, 1:]
+    return grown
 
 
 def heatmap(classes):
@@ -701,6 +726,8 @@ class Report:
                          "partial_on_lit_percent"))
         lines.append(row("flat lit ground at >= 0.999",
                          [e.flat_ground_full_fraction for e in engines], None, 4))
+        lines.append(row("  of the rest, next to a shadow",
+                         [e.flat_ground_short_at_edge_fraction for e in engines], None, 3))
         lines.append(row("frame s (shadows on, warm)", [e.seconds for e in engines],
                          "seconds"))
         t = self.texel

@@ -50,6 +50,21 @@ def test_partial_shadow_and_flat_ground_are_counted_on_cycles_fully_lit_pixels()
     assert list(classes[0]) == [1, 1, 3, 2]
 
 
+def test_flat_ground_short_of_lit_is_split_by_whether_it_touches_a_shadow():
+    # Row 0: a shadow edge at the right; the pixel beside it falls short (filter reach),
+    # the one two pixels away falls short too (a stripe, not the edge's doing).
+    cycles = np.array([[1.0, 1.0, 1.0, 1.0, 0.0],
+                       [1.0, 1.0, 1.0, 1.0, 1.0]])
+    engine = np.array([[1.0, 0.9, 1.0, 0.8, 0.0],
+                       [1.0, 1.0, 1.0, 1.0, 1.0]])
+    lit = np.ones_like(cycles, dtype=bool)
+    result, _ = ground_truth.compare(engine, cycles, lit, lit, flat=lit)
+    assert result.flat_lit_ground_pixels == 9
+    assert result.flat_lit_ground_full_pixels == 7
+    assert result.flat_lit_ground_short_at_edge_pixels == 1
+    assert result.flat_ground_short_at_edge_fraction == pytest.approx(0.5)
+
+
 def test_blurring_a_hard_edge_toward_the_reference_lowers_the_error():
     """The continuous error prefers the right penumbra: a soft reference edge, a hard
     engine edge and one blurred like the reference."""
