@@ -15,6 +15,7 @@ import numpy as np
 from ..core.camera import CameraView
 from ..core.frame import FrameSnapshot, MeshInstance, PointLight, SpotLight, Sun
 from ..core.frame_layout import MAX_POINT_LIGHTS, MAX_SPOT_LIGHTS
+from ..core.matrices import inverse_rigid
 
 # Light units are EEVEE's (docs/lighting.md), so a scene keeps its exposure when it switches
 # engine. Sun Strength is irradiance (W/m^2) and the diffuse BRDF is albedo/pi (Lambert), as
@@ -64,7 +65,7 @@ def camera_from_region(region_data, width, height):
     """The 3D viewport's view, whether looking through a camera or free."""
     clip_from_view = _matrix(region_data.window_matrix)
     view_from_world = _matrix(region_data.view_matrix)
-    return CameraView(np.linalg.inv(view_from_world), clip_from_view, width, height)
+    return CameraView(inverse_rigid(view_from_world), clip_from_view, width, height)
 
 
 def _significant(value):

@@ -17,6 +17,7 @@ from .frame import spot_cone_cosines
 from .frame_layout import (DEBUG_VIEW_INDEX, FRAME_LAYOUT, LIGHT_FALLOFF_INDEX, MAX_CASCADES,
                            MAX_POINT_LIGHTS, MAX_SHADOW_TILES, MAX_SPOT_LIGHTS,
                            PCF_PATTERN_INDEX)
+from .matrices import inverse_projection, inverse_rigid, inverse_transpose_3x3
 
 CASCADE_LINE_COLORS = ((1, .2, .2, 1), (.2, 1, .2, 1), (.3, .4, 1, 1), (1, 1, .2, 1))
 
@@ -245,7 +246,7 @@ def window_normal_from_world(tile):
     if held is not None:
         return held.copy()
     linear = (WINDOW_FROM_CLIP @ clip_from_world)[:3, :3]
-    out[:3, :3] = np.linalg.inv(linear).T
+    out[:3, :3] = inverse_transpose_3x3(linear)
     out[3, 3] = 1.0
     if len(_WINDOW_NORMALS) >= _WINDOW_NORMALS_MAX:
         _WINDOW_NORMALS.clear()
@@ -299,16 +300,21 @@ _LAST_CAMERA = [None, None]
 
 
 def _camera_matrices(camera):
-    """clip_from_world, view_from_world and world_from_clip of ``camera`` (three 4x4
-    inverses, so the last camera's are kept)."""
+    """clip_from_world, view_from_world and world_from_clip of ``camera`` (inverses, so
+    the last camera's are kept; see matrices.py for why not ``np.linalg.inv``)."""
     world_from_view = np.asarray(camera.world_from_view, dtype=np.float64)
     clip_from_view = getattr(camera, "clip_from_view", None)    # a CameraView's
     key = None if clip_from_view is None else \
         world_from_view.tobytes() + np.asarray(clip_from_view, dtype=np.float64).tobytes()
     if key is None or _LAST_CAMERA[0] != key:
-        clip_from_world = camera.clip_from_world
-        matrices = (clip_from_world, np.linalg.inv(world_from_view),
-                    np.linalg.inv(clip_from_world))
+        view_from_world = inverse_rigid(world_from_view)
+        if clip_from_view is None:
+            clip_from_world = camera.clip_from_world
+            world_from_clip = np.linalg.inv(clip_from_world)
+        else:
+            clip_from_world = np.asarray(clip_from_view, dtype=np.float64) @ view_from_world
+            world_from_clip = world_from_view @ inverse_projection(clip_from_view)
+        matrices = (clip_from_world, view_from_world, world_from_clip)
         for matrix in matrices:
             matrix.setflags(write=False)
         _LAST_CAMERA[:] = [key, matrices]
