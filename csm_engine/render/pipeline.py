@@ -216,6 +216,7 @@ class Pipeline:
         self._zeroed_emission = None   # the emission texture last cleared to zero
         self.shadow_tiles = {"drawn": 0, "skipped": 0}   # of the last frame
         self._held_lists = None     # _DrawLists of the last frame's draw items
+        self._depth_pairs = None    # the last Fit to Visible Depth read-back (benchmark)
 
     # -- resources ---------------------------------------------------------------------
     def _texture(self, name, size, fmt):
@@ -843,11 +844,18 @@ class Pipeline:
                 self._gpu_call(self._fullscreen_batch().draw, shader)
             source, is_view_depth = target, 0
         if self.skip_gpu_calls:
-            return None
-        buffer = gpu.types.Buffer('FLOAT', size[0] * size[1] * 4)
-        with fb.bind():
-            fb.read_color(0, 0, size[0], size[1], 4, 0, 'FLOAT', data=buffer)
-        pairs = np.frombuffer(buffer, dtype=np.float32).reshape(size[1], size[0], 4)[..., :2]
+            # Benchmark only (nothing was drawn to reduce): the last real frame's reduction
+            # stands in, so the frame plans, and keeps shadow tiles, as a real one does.
+            pairs = self._depth_pairs
+            if pairs is None or pairs.shape[:2] != (size[1], size[0]):
+                return None
+        else:
+            buffer = gpu.types.Buffer('FLOAT', size[0] * size[1] * 4)
+            with fb.bind():
+                fb.read_color(0, 0, size[0], size[1], 4, 0, 'FLOAT', data=buffer)
+            pairs = np.frombuffer(buffer, dtype=np.float32).reshape(
+                size[1], size[0], 4)[..., :2]
+            self._depth_pairs = pairs
         return depth_blocks_from_reduction(pairs, self.DEPTH_BLOCK_PIXELS, width, height)
 
     # -- anti-aliasing -------------------------------------------------------------------
