@@ -901,17 +901,24 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
     it and it is less than 1/``shrink_below`` of what they need: small camera moves then
     leave the cascade where it was, and the texel size changes rarely, by whole steps."""
     _ndc_low, _ndc_high, nearest, farthest = blocks
-    inside = (farthest >= near_depth) & (nearest <= far_depth)
-    if not np.any(inside):
+    # Indices, not a mask: ``take`` is several times faster than boolean indexing here.
+    inside = np.flatnonzero((farthest >= near_depth) & (nearest <= far_depth))
+    if not len(inside):
         return None
-    d0 = np.maximum(nearest[inside], near_depth)
-    d1 = np.minimum(farthest[inside], far_depth)
+    d0 = np.maximum(nearest.take(inside), near_depth)
+    d1 = np.minimum(farthest.take(inside), far_depth)
     terms, c, offset, is_perspective = _receiver_terms(world_from_view, projection, blocks,
                                                        light_from_world_rot)
+    positive = is_perspective and d0.min() > 0.0     # d1 >= d0 for a block inside
     low, high = np.empty(2), np.empty(2)
     for axis in range(2):
-        g_lo, g_hi = terms[2 * axis][inside], terms[2 * axis + 1][inside]
-        if is_perspective:
+        g_lo, g_hi = terms[2 * axis].take(inside), terms[2 * axis + 1].take(inside)
+        if positive:
+            # d g is least at d0 or d1 times g's least, greatest at d0 or d1 times its
+            # greatest, as d > 0.
+            low[axis] = min((d0 * g_lo).min(), (d1 * g_lo).min())
+            high[axis] = max((d0 * g_hi).max(), (d1 * g_hi).max())
+        elif is_perspective:
             # Bilinear in (d, g): the extremes are at d0 or d1 times g's least or greatest.
             products = (d0 * g_lo, d1 * g_lo, d0 * g_hi, d1 * g_hi)
             low[axis] = min(float(p.min()) for p in products)

@@ -82,13 +82,36 @@ def depth_blocks_from_reduction(pairs, block_pixels, width, height):
     ``pairs``: (rows, cols, 2) nearest / farthest view depth per block (rows bottom-up;
     nearest > 1e37 where a block shows only background)."""
     pairs = np.asarray(pairs, dtype=np.float64)
-    rows, cols = np.nonzero(pairs[..., 0] < 1e37)
-    x0 = cols * block_pixels / width * 2.0 - 1.0
-    x1 = np.minimum((cols + 1) * block_pixels, width) / width * 2.0 - 1.0
-    y0 = rows * block_pixels / height * 2.0 - 1.0
-    y1 = np.minimum((rows + 1) * block_pixels, height) / height * 2.0 - 1.0
-    return (np.stack([x0, y0], axis=-1), np.stack([x1, y1], axis=-1),
-            pairs[rows, cols, 0], pairs[rows, cols, 1])
+    shown = pairs[..., 0] < 1e37
+    ndc_low, ndc_high = _block_corners(shown.shape, block_pixels, width, height)
+    return ndc_low[shown], ndc_high[shown], pairs[..., 0][shown], pairs[..., 1][shown]
+
+
+# (rows, cols, block pixels, width, height) -> every block's NDC corners (rows, cols, 2):
+# the same for every frame of one viewport size.
+_BLOCK_CORNERS = {}
+
+
+def _block_corners(shape, block_pixels, width, height):
+    key = (shape, block_pixels, width, height)
+    held = _BLOCK_CORNERS.get(key)
+    if held is None:
+        rows, cols = np.indices(shape)
+        x0 = cols * block_pixels / width * 2.0 - 1.0
+        x1 = np.minimum((cols + 1) * block_pixels, width) / width * 2.0 - 1.0
+        y0 = rows * block_pixels / height * 2.0 - 1.0
+        y1 = np.minimum((rows + 1) * block_pixels, height) / height * 2.0 - 1.0
+        held = (np.stack([x0, y0], axis=-1), np.stack([x1, y1], axis=-1))
+        for array in held:
+            array.setflags(write=False)
+        if len(_BLOCK_CORNERS) >= 8:
+            _BLOCK_CORNERS.clear()
+        _BLOCK_CORNERS[key] = held
+    return held
+
+
+# Which end of the bounds each of a box's 8 corners takes per axis (bit a of the index).
+_CORNER_PICK = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)], dtype=bool)
 
 
 def plan_shadows(snap, bounds, depth_blocks=None):
@@ -183,11 +206,12 @@ def plan_shadows(snap, bounds, depth_blocks=None):
     if bounds is not None:
         # The shadow-map view stretches depth over the part the scene occupies; the occluder
         # margin alone would squeeze all content into the last few percent of grey.
-        corners = np.array([[bounds[i & 1][0], bounds[(i >> 1) & 1][1], bounds[(i >> 2) & 1][2],
-                             1.0] for i in range(8)])
+        lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+        corners = np.ones((8, 4))
+        corners[:, :3] = np.where(_CORNER_PICK, hi, lo)
         for tile in tiles:
             clip = corners @ tile.clip_from_world.T
-            window = np.clip(clip[:, 2] / clip[:, 3] * 0.5 + 0.5, 0.0, 1.0).min()
+            window = min(max(float((clip[:, 2] / clip[:, 3]).min()) * 0.5 + 0.5, 0.0), 1.0)
             if tile.is_perspective:
                 ndc = window * 2.0 - 1.0
                 tile.display_near = 2.0 * tile.near * tile.far / (
