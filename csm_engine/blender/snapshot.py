@@ -15,6 +15,7 @@ import numpy as np
 from ..core.camera import CameraView
 from ..core.frame import FrameSnapshot, MeshInstance, PointLight, SpotLight, Sun
 from ..core.frame_layout import MAX_POINT_LIGHTS, MAX_SPOT_LIGHTS
+from ..core.matrices import inverse_rigid
 
 # Light units are EEVEE's (docs/lighting.md), so a scene keeps its exposure when it switches
 # engine. Sun Strength is irradiance (W/m^2) and the diffuse BRDF is albedo/pi (Lambert), as
@@ -64,7 +65,7 @@ def camera_from_region(region_data, width, height):
     """The 3D viewport's view, whether looking through a camera or free."""
     clip_from_view = _matrix(region_data.window_matrix)
     view_from_world = _matrix(region_data.view_matrix)
-    return CameraView(np.linalg.inv(view_from_world), clip_from_view, width, height)
+    return CameraView(inverse_rigid(view_from_world), clip_from_view, width, height)
 
 
 def _significant(value):
@@ -237,6 +238,10 @@ def _local_light_color(light, falloff):
     return color * WATTS_TO_INTENSITY
 
 
+# Object types whose evaluated geometry is a mesh CSM draws.
+_MESH_TYPES = frozenset({'MESH', 'CURVE', 'SURFACE', 'FONT', 'META'})
+
+
 def take(depsgraph, camera, is_viewport=False):
     """Read one frame's worth of plain data out of the evaluated depsgraph."""
     scene = depsgraph.scene_eval if hasattr(depsgraph, "scene_eval") else depsgraph.scene
@@ -255,23 +260,32 @@ def take(depsgraph, camera, is_viewport=False):
     snap.background = world_color
 
     matrices = []
+    instances = snap.instances
+    mesh_sources = snap.mesh_sources
+    check_shown = None      # whether instances have show_self (asked once, not per object)
     for instance in depsgraph.object_instances:
+        if is_viewport:
+            if check_shown is None:
+                check_shown = hasattr(instance, "show_self")
+            if check_shown and not instance.show_self:
+                continue
         obj = instance.object
-        if is_viewport and hasattr(instance, "show_self") and not instance.show_self:
-            continue
-        if obj.type == 'LIGHT':
+        kind = obj.type
+        if kind == 'LIGHT':
             _add_light(snap, obj, _matrix(instance.matrix_world), light_threshold)
-        elif obj.type in {'MESH', 'CURVE', 'SURFACE', 'FONT', 'META'}:
-            key = obj.original.name if obj.original else obj.name
+        elif kind in _MESH_TYPES:
+            original = obj.original
+            key = original.name if original else obj.name
             # Blender 3.0+ per-object ray visibility, as EEVEE and Cycles honour it: hidden
             # from the camera but still casting, or seen but casting no shadow.
-            snap.instances.append(MeshInstance(
+            instances.append(MeshInstance(
                 key, None,
                 visible_camera=bool(getattr(obj, "visible_camera", True)),
                 casts_shadow=bool(getattr(obj, "visible_shadow", True))))
             # A copy: the instance (and a Matrix that wraps it) is reused by the iterator.
             matrices.append(instance.matrix_world.copy())
-            snap.mesh_sources.setdefault(key, obj)
+            if key not in mesh_sources:
+                mesh_sources[key] = obj
     # One conversion for every instance (one Matrix at a time costs twice as much).
     for mesh_instance, matrix in zip(snap.instances,
                                      np.array(matrices, dtype=np.float64).reshape(-1, 4, 4)):

@@ -16,6 +16,7 @@ from functools import cached_property
 import numpy as np
 
 from .checks import finite, matrix4
+from .matrices import inverse_projection, inverse_rigid
 
 
 # Widest far / near ratio a perspective camera is drawn with (see from_clip_from_view).
@@ -196,8 +197,17 @@ class CameraView:
         return f / np.linalg.norm(f)
 
     @property
+    def view_from_world(self):
+        return inverse_rigid(self.world_from_view)
+
+    @property
     def clip_from_world(self):
-        return self.clip_from_view @ np.linalg.inv(self.world_from_view)
+        return self.clip_from_view @ self.view_from_world
+
+    @property
+    def world_from_clip(self):
+        return np.asarray(self.world_from_view, dtype=np.float64) @ \
+            inverse_projection(self.clip_from_view)
 
 
 def world_positions(camera, view_depth):

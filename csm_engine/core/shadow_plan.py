@@ -17,6 +17,7 @@ from .frame import spot_cone_cosines
 from .frame_layout import (DEBUG_VIEW_INDEX, FRAME_LAYOUT, LIGHT_FALLOFF_INDEX, MAX_CASCADES,
                            MAX_POINT_LIGHTS, MAX_SHADOW_TILES, MAX_SPOT_LIGHTS,
                            PCF_PATTERN_INDEX)
+from .matrices import inverse_projection, inverse_rigid, inverse_transpose_3x3
 
 CASCADE_LINE_COLORS = ((1, .2, .2, 1), (.2, 1, .2, 1), (.3, .4, 1, 1), (1, 1, .2, 1))
 
@@ -81,13 +82,36 @@ def depth_blocks_from_reduction(pairs, block_pixels, width, height):
     ``pairs``: (rows, cols, 2) nearest / farthest view depth per block (rows bottom-up;
     nearest > 1e37 where a block shows only background)."""
     pairs = np.asarray(pairs, dtype=np.float64)
-    rows, cols = np.nonzero(pairs[..., 0] < 1e37)
-    x0 = cols * block_pixels / width * 2.0 - 1.0
-    x1 = np.minimum((cols + 1) * block_pixels, width) / width * 2.0 - 1.0
-    y0 = rows * block_pixels / height * 2.0 - 1.0
-    y1 = np.minimum((rows + 1) * block_pixels, height) / height * 2.0 - 1.0
-    return (np.stack([x0, y0], axis=-1), np.stack([x1, y1], axis=-1),
-            pairs[rows, cols, 0], pairs[rows, cols, 1])
+    shown = pairs[..., 0] < 1e37
+    ndc_low, ndc_high = _block_corners(shown.shape, block_pixels, width, height)
+    return ndc_low[shown], ndc_high[shown], pairs[..., 0][shown], pairs[..., 1][shown]
+
+
+# (rows, cols, block pixels, width, height) -> every block's NDC corners (rows, cols, 2):
+# the same for every frame of one viewport size.
+_BLOCK_CORNERS = {}
+
+
+def _block_corners(shape, block_pixels, width, height):
+    key = (shape, block_pixels, width, height)
+    held = _BLOCK_CORNERS.get(key)
+    if held is None:
+        rows, cols = np.indices(shape)
+        x0 = cols * block_pixels / width * 2.0 - 1.0
+        x1 = np.minimum((cols + 1) * block_pixels, width) / width * 2.0 - 1.0
+        y0 = rows * block_pixels / height * 2.0 - 1.0
+        y1 = np.minimum((rows + 1) * block_pixels, height) / height * 2.0 - 1.0
+        held = (np.stack([x0, y0], axis=-1), np.stack([x1, y1], axis=-1))
+        for array in held:
+            array.setflags(write=False)
+        if len(_BLOCK_CORNERS) >= 8:
+            _BLOCK_CORNERS.clear()
+        _BLOCK_CORNERS[key] = held
+    return held
+
+
+# Which end of the bounds each of a box's 8 corners takes per axis (bit a of the index).
+_CORNER_PICK = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)], dtype=bool)
 
 
 def plan_shadows(snap, bounds, depth_blocks=None):
@@ -182,11 +206,12 @@ def plan_shadows(snap, bounds, depth_blocks=None):
     if bounds is not None:
         # The shadow-map view stretches depth over the part the scene occupies; the occluder
         # margin alone would squeeze all content into the last few percent of grey.
-        corners = np.array([[bounds[i & 1][0], bounds[(i >> 1) & 1][1], bounds[(i >> 2) & 1][2],
-                             1.0] for i in range(8)])
+        lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+        corners = np.ones((8, 4))
+        corners[:, :3] = np.where(_CORNER_PICK, hi, lo)
         for tile in tiles:
             clip = corners @ tile.clip_from_world.T
-            window = np.clip(clip[:, 2] / clip[:, 3] * 0.5 + 0.5, 0.0, 1.0).min()
+            window = min(max(float((clip[:, 2] / clip[:, 3]).min()) * 0.5 + 0.5, 0.0), 1.0)
             if tile.is_perspective:
                 ndc = window * 2.0 - 1.0
                 tile.display_near = 2.0 * tile.near * tile.far / (
@@ -245,7 +270,7 @@ def window_normal_from_world(tile):
     if held is not None:
         return held.copy()
     linear = (WINDOW_FROM_CLIP @ clip_from_world)[:3, :3]
-    out[:3, :3] = np.linalg.inv(linear).T
+    out[:3, :3] = inverse_transpose_3x3(linear)
     out[3, 3] = 1.0
     if len(_WINDOW_NORMALS) >= _WINDOW_NORMALS_MAX:
         _WINDOW_NORMALS.clear()
@@ -299,16 +324,21 @@ _LAST_CAMERA = [None, None]
 
 
 def _camera_matrices(camera):
-    """clip_from_world, view_from_world and world_from_clip of ``camera`` (three 4x4
-    inverses, so the last camera's are kept)."""
+    """clip_from_world, view_from_world and world_from_clip of ``camera`` (inverses, so
+    the last camera's are kept; see matrices.py for why not ``np.linalg.inv``)."""
     world_from_view = np.asarray(camera.world_from_view, dtype=np.float64)
     clip_from_view = getattr(camera, "clip_from_view", None)    # a CameraView's
     key = None if clip_from_view is None else \
         world_from_view.tobytes() + np.asarray(clip_from_view, dtype=np.float64).tobytes()
     if key is None or _LAST_CAMERA[0] != key:
-        clip_from_world = camera.clip_from_world
-        matrices = (clip_from_world, np.linalg.inv(world_from_view),
-                    np.linalg.inv(clip_from_world))
+        view_from_world = inverse_rigid(world_from_view)
+        if clip_from_view is None:
+            clip_from_world = camera.clip_from_world
+            world_from_clip = np.linalg.inv(clip_from_world)
+        else:
+            clip_from_world = np.asarray(clip_from_view, dtype=np.float64) @ view_from_world
+            world_from_clip = world_from_view @ inverse_projection(clip_from_view)
+        matrices = (clip_from_world, view_from_world, world_from_clip)
         for matrix in matrices:
             matrix.setflags(write=False)
         _LAST_CAMERA[:] = [key, matrices]

@@ -195,6 +195,25 @@ def _writes_emission(items):
     return False
 
 
+class _DrawLists:
+    """What the passes derive from one frame's draw items (``Pipeline._draw_items``), kept
+    with them: the same items (``_kept_draw_items`` keeps them while meshes, materials and
+    textures are the same) give the same answers. Per instance: whether each G-buffer
+    pass of _GBUFFER_PASSES and each shadow program (opaque, alpha-masked) draws it."""
+    __slots__ = ("items", "writes_emission", "gbuffer_masks", "shadow_masks", "signatures")
+
+    def __init__(self, items):
+        self.items = items
+        self.writes_emission = _writes_emission(items)
+        self.gbuffer_masks = tuple(
+            np.array([bool(entry[slot]) and (tangents is None or entry[4] == tangents)
+                      for entry in items], dtype=bool)
+            for _program, slot, tangents in _GBUFFER_PASSES)
+        self.shadow_masks = tuple(np.array([bool(entry[2 + masked]) for entry in items],
+                                           dtype=bool) for masked in (0, 1))
+        self.signatures = None      # Pipeline._caster_signatures, asked for once
+
+
 class RenderTargetError(Exception):
     """A render target or shadow map could not be allocated; the message says which and
     how large."""
@@ -220,6 +239,8 @@ class Pipeline:
         self._zeroed_emission = None   # the emission texture last cleared to zero
         self.gbuffer_kept = False   # this frame's G-buffer is the frame before's (see draw)
         self.shadow_tiles = {"drawn": 0, "skipped": 0}   # of the last frame
+        self._held_lists = None     # _DrawLists of the last frame's draw items
+        self._depth_pairs = None    # the last Fit to Visible Depth read-back (benchmark)
 
     # -- resources ---------------------------------------------------------------------
     def _texture(self, name, size, fmt):
@@ -347,6 +368,9 @@ class Pipeline:
         # their material inputs, and its matrix; the passes below only index into these.
         white = self._white_texture()
         items = self._kept_draw_items(snap, cache, white)
+        lists = self._held_lists
+        if lists is None or lists.items is not items:
+            lists = self._held_lists = _DrawLists(items)
         world_from_objects = instances.world_from_objects
         world_from_objects_gl = instances.world_from_objects_gl
         mirrored = instances.mirrored
@@ -359,10 +383,13 @@ class Pipeline:
             held = self._atlas_contents(atlas)
             # Blender 3.4's gpu.state has no scissor: there the whole atlas is cleared and drawn.
             can_clear_tile = hasattr(gpu.state, "scissor_set")
-            signatures = self._caster_signatures(snap, cache, items)
+            if lists.signatures is None:
+                lists.signatures = self._caster_signatures(snap, cache, items)
+            signatures = lists.signatures
             cull_front = bool(snap.settings.cull_front_faces)
             stale = []
-            casts_shadow = np.array([i.casts_shadow for i in snap.instances], dtype=bool)
+            casts_shadow = np.fromiter((i.casts_shadow for i in snap.instances), dtype=bool,
+                                       count=len(snap.instances))
             for tile in plan.tiles:
                 visible = np.asarray(self._cull(snap.instances, bounds_lo_hi, tile), dtype=np.int64)
                 visible = visible[casts_shadow[visible]]
@@ -401,8 +428,9 @@ class Pipeline:
                         # the next frame draws it again.
                         held.pop(key, None)
                     if len(visible):
-                        self._draw_casters(library, items, world_from_objects, tile, visible,
-                                           mirrored, cull_front)
+                        self._draw_casters(library, items, lists.shadow_masks,
+                                           world_from_objects, tile, visible, mirrored,
+                                           cull_front)
                     if not self.skip_gpu_calls:
                         held[key] = signature
                 gpu.state.face_culling_set('NONE')
@@ -419,7 +447,7 @@ class Pipeline:
             # Emission and metallic have a target only in frames that draw some: without
             # it each fragment writes a sixth less (llvmpipe: ~15 % of the G-buffer), and
             # the lighting pass reads an emission texture kept at zero.
-            if _writes_emission(items):
+            if lists.writes_emission:
                 gbuffer_fb = self._framebuffer("gbuffer", depth=depth,
                                                colors=(albedo, normal, view_depth, emission))
                 self._zeroed_emission = None
@@ -433,7 +461,8 @@ class Pipeline:
                     self._zeroed_emission = emission
             # Near to far, so the early depth test skips the shading of hidden fragments.
             order = np.asarray(front_to_back(snap, bounds_lo_hi), dtype=np.int64)
-            order = order[np.array([i.visible_camera for i in snap.instances], dtype=bool)[order]]
+            order = order[np.fromiter((i.visible_camera for i in snap.instances), dtype=bool,
+                                      count=len(snap.instances))[order]]
             # A G-buffer that would come out the same as the one the targets hold is not
             # drawn again (F12 after a shadow or light setting changed; an unchanged
             # re-render), nor is its AO (see _ambient_occlusion).
@@ -463,18 +492,17 @@ class Pipeline:
                 # Opaque before alpha-tested; untextured materials with the program that
                 # samples no texture, meshes with tangents (normal maps) with the programs
                 # that read them. (slot in the _draw_items entry, tangents or None: any)
-                for program, slot, tangents in _GBUFFER_PASSES:
-                    gbuffer = None
-                    for index in order:
-                        entry = items[index]
-                        draws = entry[slot]
-                        if not draws or (tangents is not None and entry[4] != tangents):
-                            continue
-                        if gbuffer is None:
-                            gbuffer = library.get(program)
-                            gbuffer.bind()
-                            gbuffer.uniform_block("frame", frame_ubo)
-                            bound = None
+                for (program, slot, _tangents), drawn in zip(_GBUFFER_PASSES,
+                                                             lists.gbuffer_masks):
+                    rows = order[drawn[order]]
+                    if not len(rows):
+                        continue
+                    gbuffer = library.get(program)
+                    gbuffer.bind()
+                    gbuffer.uniform_block("frame", frame_ubo)
+                    bound = None
+                    for index in rows.tolist():
+                        draws = items[index][slot]
                         gbuffer.uniform_float("world_from_object", world_from_objects_gl[index])
                         for batch, material in draws:
                             wanted = ('FRONT' if mirrored[index] else 'BACK') \
@@ -617,21 +645,22 @@ class Pipeline:
             self._textures["ao_contents"] = (blurred, inputs)
         return blurred
 
-    def _draw_casters(self, library, items, world_from_objects, tile, visible, mirrored,
-                      cull_front):
+    def _draw_casters(self, library, items, shadow_masks, world_from_objects, tile, visible,
+                      mirrored, cull_front):
         import gpu
         clip_from_objects = _column_major_stack(tile.clip_from_world @
                                                 world_from_objects[visible])
         default = 'FRONT' if cull_front else 'NONE'
         culling = default
         for masked in (False, True):
+            rows = np.flatnonzero(shadow_masks[masked][visible])
+            if not len(rows):
+                continue
             shadow = library.get("shadow_masked" if masked else "shadow")
             shadow.bind()
             bound = None
-            for row, index in enumerate(visible):
+            for row, index in zip(rows.tolist(), visible[rows].tolist()):
                 draws = items[index][2 + masked]
-                if not draws:
-                    continue
                 shadow.uniform_float("clip_from_object", clip_from_objects[row])
                 for batch, material in draws:
                     # 4.2+ "Backface Culling" of shadows: the faces turned away from the
@@ -783,8 +812,10 @@ class Pipeline:
         """Per instance: (camera opaque textured draws, camera alpha-tested draws, shadow
         opaque draws, shadow alpha-tested draws, whether the mesh has tangents, camera
         opaque untextured draws); each draw is (batch, ``_DrawMaterial``). Instances of one
-        mesh share the lists."""
+        mesh share the lists, and slots of one material share its ``_DrawMaterial`` (so the
+        G-buffer binds a material shared by many objects once)."""
         per_mesh = {}
+        per_material = {}
         items = []
         for instance in snap.instances:
             entry = per_mesh.get(instance.key)
@@ -792,7 +823,7 @@ class Pipeline:
                 mesh = cache.meshes.get(instance.key)
                 entry = ([], [], [], [], bool(mesh is not None and mesh.has_tangents), [])
                 for batch, slot in (mesh.batches if mesh is not None else ()):
-                    material = self._material(cache, mesh, slot, white)
+                    material = self._material(cache, mesh, slot, white, per_material)
                     camera = 1 if material.alpha_mode != 'OPAQUE' else \
                         (0 if material.textured else 5)
                     entry[camera].append((batch, material))
@@ -803,7 +834,7 @@ class Pipeline:
             items.append(entry)
         return items
 
-    def _material(self, cache, mesh, slot, white):
+    def _material(self, cache, mesh, slot, white, memo=None):
         """One material slot as both the shadow and G-buffer passes draw it: its uniform
         block (made once per MaterialInfo and set of loadable textures, kept on it),
         textures (white where there is none) and settings."""
@@ -811,6 +842,12 @@ class Pipeline:
         material = mesh.materials[slot] if slot < len(mesh.materials) else None
         if material is None:
             material = _DEFAULT_MATERIAL
+        if memo is not None:
+            # Keyed by identity: MaterialInfo objects live in the meshes' lists meanwhile.
+            held = memo.get(id(material))
+            if held is None:
+                held = memo[id(material)] = self._material(cache, mesh, slot, white)
+            return held
         images = (material.image, material.normal_image, material.emission_image,
                   material.surface_image)
         textures = tuple(cache.texture(image) if image is not None else None
@@ -907,11 +944,18 @@ class Pipeline:
                 self._gpu_call(self._fullscreen_batch().draw, shader)
             source, is_view_depth = target, 0
         if self.skip_gpu_calls:
-            return None
-        buffer = gpu.types.Buffer('FLOAT', size[0] * size[1] * 4)
-        with fb.bind():
-            fb.read_color(0, 0, size[0], size[1], 4, 0, 'FLOAT', data=buffer)
-        pairs = np.frombuffer(buffer, dtype=np.float32).reshape(size[1], size[0], 4)[..., :2]
+            # Benchmark only (nothing was drawn to reduce): the last real frame's reduction
+            # stands in, so the frame plans, and keeps shadow tiles, as a real one does.
+            pairs = self._depth_pairs
+            if pairs is None or pairs.shape[:2] != (size[1], size[0]):
+                return None
+        else:
+            buffer = gpu.types.Buffer('FLOAT', size[0] * size[1] * 4)
+            with fb.bind():
+                fb.read_color(0, 0, size[0], size[1], 4, 0, 'FLOAT', data=buffer)
+            pairs = np.frombuffer(buffer, dtype=np.float32).reshape(
+                size[1], size[0], 4)[..., :2]
+            self._depth_pairs = pairs
         return depth_blocks_from_reduction(pairs, self.DEPTH_BLOCK_PIXELS, width, height)
 
     # -- anti-aliasing -------------------------------------------------------------------

@@ -95,3 +95,52 @@ def test_window_normal_gives_the_receiver_planes_depth_slope():
     wn = normal_from_world[:3, :3] @ n
     predicted = -(wn[0] * (w1[0] - w0[0]) + wn[1] * (w1[1] - w0[1])) / wn[2]
     assert w1[2] - w0[2] == pytest.approx(predicted, rel=1e-9, abs=1e-12)
+
+
+def _corner_bounds(world_from_view, projection, blocks, near_depth, far_depth, rotation):
+    """The receivers' light-frame xy bounds the plain way: every block's 8 corners."""
+    ndc_low, ndc_high, nearest, farthest = blocks
+    inside = (farthest >= near_depth) & (nearest <= far_depth)
+    d0 = np.maximum(nearest[inside], near_depth)
+    d1 = np.minimum(farthest[inside], far_depth)
+    left, right, bottom, top = projection.view_window()
+    corners = []
+    for x_ndc in (ndc_low[inside, 0], ndc_high[inside, 0]):
+        for y_ndc in (ndc_low[inside, 1], ndc_high[inside, 1]):
+            x = left + (x_ndc + 1.0) * 0.5 * (right - left)
+            y = bottom + (y_ndc + 1.0) * 0.5 * (top - bottom)
+            for d in (d0, d1):
+                scale = d if projection.is_perspective else 1.0
+                corners.append(np.stack([x * scale, y * scale, -d], axis=-1))
+    view = np.concatenate(corners)
+    world = view @ world_from_view[:3, :3].T + world_from_view[:3, 3]
+    xy = world @ rotation[:2, :3].T
+    return xy.min(axis=0), xy.max(axis=0)
+
+
+@pytest.mark.parametrize("projection", [
+    PROJECTION,
+    CameraProjection(kind="ORTHO", ortho_height=20.0, aspect=16 / 9, clip_start=-30.0,
+                     clip_end=300.0)])
+def test_receiver_rectangle_bounds_equal_every_corners_bounds(projection):
+    """receiver_square finds each axis's extremes per block without forming its 8
+    corners; the bounds must be those of the corners (the rectangle's centre is their
+    middle and each half width is rounded up from half their span)."""
+    rng = np.random.default_rng(7)
+    for trial in range(20):
+        q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+        q = q * np.sign(np.diag(r))
+        if np.linalg.det(q) < 0:
+            q[:, 0] *= -1
+        world_from_view = np.eye(4)
+        world_from_view[:3, :3], world_from_view[:3, 3] = q, rng.normal(size=3) * 50.0
+        rotation = cascades.light_view_matrix(rng.normal(size=3))
+        low = rng.uniform(-1.0, 0.95, size=(500, 2))
+        nearest = rng.uniform(0.5 if projection.is_perspective else -20.0, 60.0, size=500)
+        blocks = (low, low + rng.uniform(0.0, 0.05, size=(500, 2)), nearest,
+                  nearest + rng.uniform(0.0, 20.0, size=500))
+        centre, half = cascades.receiver_square(world_from_view, projection, blocks,
+                                                10.0, 40.0, rotation)
+        lo, hi = _corner_bounds(world_from_view, projection, blocks, 10.0, 40.0, rotation)
+        np.testing.assert_allclose(centre, 0.5 * (lo + hi), rtol=1e-12, atol=1e-10)
+        assert np.all(half >= 0.5 * (hi - lo)) and np.all(half <= (hi - lo) + 1e-9)

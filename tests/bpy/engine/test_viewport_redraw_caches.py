@@ -21,9 +21,11 @@ def _scene(empty_scene):
     scene = empty_scene
     bpy.ops.mesh.primitive_plane_add(size=30)
     ground = bpy.context.object
+    cubes = []
     for x in range(-2, 3):
         bpy.ops.mesh.primitive_cube_add(location=(2.5 * x, 1.5 * x, 1))
-    cube = bpy.context.object
+        cubes.append(bpy.context.object)
+    cube = cubes[-1]
     # The ground reads its colour from an image, so an edit of the image's pixels shows.
     image = bpy.data.images.new("checker", 4, 4)
     image.pixels.foreach_set(np.full(4 * 4 * 4, 0.8, dtype=np.float32))
@@ -37,12 +39,14 @@ def _scene(empty_scene):
     ground.data.materials.append(material)
     cube_material = bpy.data.materials.new("cube")
     cube.data.materials.append(cube_material)
+    # Two objects share one material: the G-buffer binds it once for both.
+    cubes[0].data.materials.append(cube_material)
     bpy.ops.object.light_add(type='SUN', rotation=(np.radians(40), np.radians(20), 0.3))
     bpy.ops.object.camera_add(location=(0, -14, 7), rotation=(np.radians(65), 0, 0))
     scene.camera = bpy.context.object
     scene.world = bpy.data.worlds.new("sky")     # ambient light, so its strength shows
     scene.world.color = (0.3, 0.3, 0.3)
-    return scene, cube, cube_material, image
+    return scene, cubes, cube_material, image
 
 
 class _Viewport:
@@ -79,7 +83,8 @@ def _frame(scene, renderer, cache):
 
 
 def test_every_edit_shows_in_the_next_redraw(empty_scene):
-    scene, cube, cube_material, image = _scene(empty_scene)
+    scene, cubes, cube_material, image = _scene(empty_scene)
+    cube = cubes[-1]
     render_scene(scene, 32, 32)              # a GPU context exists from here on
     view = _Viewport()
     try:
@@ -119,6 +124,10 @@ def test_every_edit_shows_in_the_next_redraw(empty_scene):
         edit("image pixels", paint)
         edit("setting", lambda: setattr(scene.csm, "ambient_strength", 3.0))
         edit("no shadow", lambda: setattr(cube, "visible_shadow", False))
+        edit("hidden from the camera", lambda: setattr(cubes[0], "visible_camera", False))
         edit("delete", lambda: bpy.data.objects.remove(cube))
+        # The view's inverse is formed in closed form (core/matrices.py) each frame.
+        edit("camera turned", lambda: setattr(scene.camera, "rotation_euler",
+                                              (np.radians(62), 0.0, np.radians(6))))
     finally:
         view.close()
