@@ -13,6 +13,7 @@ itself, so the request travels to ``render()`` for the duration of that one call
 
 import atexit
 import contextlib
+import dataclasses
 import time
 
 import bpy
@@ -130,6 +131,7 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         super().__init__(*args, **kwargs)
         self.pipeline = None
         self.cache = None
+        self.snapshots = ViewportSnapshots()
 
     def __del__(self):
         # Drop GPU objects while the engine's context is still known to Blender.
@@ -236,6 +238,7 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         if self.cache is None:
             self.cache = mesh_cache.MeshCache()
         apply_depsgraph_updates(self.cache, depsgraph.updates)
+        self.snapshots.scene_changed = True
 
     def view_draw(self, context, depsgraph):
         import gpu
@@ -247,9 +250,7 @@ class CSMRenderEngine(bpy.types.RenderEngine):
                 self.pipeline = pipeline.Pipeline()
             camera = snapshot.camera_from_region(context.region_data, region.width,
                                                  region.height)
-            snap = snapshot.take(depsgraph, camera, is_viewport=True)
-            self.cache.sync(snap.mesh_sources)
-            snap.mesh_sources = {}
+            snap = self.snapshots.frame(depsgraph, camera, self.cache)
             gpu.state.blend_set('ALPHA_PREMULT' if snap.film_transparent else 'NONE')
             self.pipeline.draw_viewport(snap, self.cache, region.width, region.height,
                                         fxaa=bool(snap.settings.fxaa))
@@ -266,6 +267,34 @@ class CSMRenderEngine(bpy.types.RenderEngine):
             gpu.state.blend_set('NONE')
             gpu.state.depth_test_set('NONE')
             gpu.state.depth_mask_set(False)
+
+
+class ViewportSnapshots:
+    """The viewport's frame snapshot between redraws.
+
+    Blender calls ``view_update`` after every depsgraph update (an object, light,
+    material, World or CSM setting edited, the frame changed, undo) before the next
+    ``view_draw``; ``scene_changed`` records it. A redraw with no update since the last
+    one (orbit, pan, zoom, a resized region) draws the last snapshot with the new view and
+    reads nothing from Blender: no pass over every object and its matrix."""
+
+    def __init__(self):
+        self.snap = None
+        self.scene_changed = True
+        self._time = None
+
+    def frame(self, depsgraph, camera, cache):
+        """This redraw's snapshot; ``cache`` is synced when the scene was read again. A
+        new frame number reads it again too, whatever ``view_update`` said."""
+        scene = depsgraph.scene
+        time = (scene.frame_current, scene.frame_subframe)
+        if self.snap is None or self.scene_changed or time != self._time:
+            snap = snapshot.take(depsgraph, camera, is_viewport=True)
+            cache.sync(snap.mesh_sources)
+            snap.mesh_sources = {}
+            self.snap, self.scene_changed, self._time = snap, False, time
+            return snap
+        return dataclasses.replace(self.snap, camera=camera)
 
 
 def render_region(render, width, height):

@@ -17,8 +17,9 @@ How each number is taken:
   hand-off, colour management, the operator itself).
 - EEVEE frame: the same scene with EEVEE, 1 render sample, one warm-up (shader compilation),
   then the median of N.
-- Viewport: what ``CSMRenderEngine.view_draw`` does per redraw, minus the window: snapshot,
-  cache sync on an already-synced cache, then ``Pipeline.draw`` into an offscreen target.
+- Viewport: what ``CSMRenderEngine.view_draw`` does per redraw, minus the window: the
+  snapshot (``engine.ViewportSnapshots``: read again only after a depsgraph update, as
+  ``view_update`` reports them), then ``Pipeline.draw`` into an offscreen target.
   "Python overhead" is the same redraw with the draw and clear calls skipped: snapshot,
   sync, planning, binding and uniforms.
 """
@@ -216,9 +217,13 @@ def viewport_cost(scene, width, height, redraws):
 
     cache = mesh_cache.MeshCache()
     renderer = pipeline.Pipeline()
+    snapshots = engine.ViewportSnapshots()
     target = gpu.types.GPUOffScreen(width, height)
-    handler = (lambda _scene, depsgraph:
-               engine.apply_depsgraph_updates(cache, depsgraph.updates))
+
+    def handler(_scene, depsgraph):
+        """What view_update does: invalidations, and the scene read again next redraw."""
+        engine.apply_depsgraph_updates(cache, depsgraph.updates)
+        snapshots.scene_changed = True
     bpy.app.handlers.depsgraph_update_post.append(handler)
 
     def redraw(camera, python_only=False):
@@ -229,9 +234,8 @@ def viewport_cost(scene, width, height, redraws):
         renderer.skip_gpu_calls = python_only
         start = time.perf_counter()
         depsgraph = bpy.context.evaluated_depsgraph_get()
-        snap = snapshot.take(depsgraph, camera, is_viewport=True)
-        cache.sync(snap.mesh_sources)
-        snap.mesh_sources = {}
+        # As view_draw: the scene is read again only after a depsgraph update.
+        snap = snapshots.frame(depsgraph, camera, cache)
         try:
             with target.bind():
                 fb = gpu.state.active_framebuffer_get()
