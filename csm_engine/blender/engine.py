@@ -92,6 +92,14 @@ def forget_final_render_meshes():
     _FORGET_FINAL_MESHES[0] = True
 
 
+def forget_final_render_passes():
+    """Make the next final render draw every pass again (shadow maps, G-buffer, AO), as
+    one whose view and scene changed does; its meshes are kept (the benchmark's full
+    frames)."""
+    for name in ("gbuffer_contents", "ao_contents", "depth_blocks", "atlas_contents"):
+        _FINAL_RENDER_TEXTURES.pop(name, None)
+
+
 def _final_mesh_cache():
     if not _FINAL_RENDER_MESHES:
         _FINAL_RENDER_MESHES.append(mesh_cache.MeshCache(check_contents=True, realize=False))

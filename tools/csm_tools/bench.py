@@ -9,8 +9,8 @@ How each number is taken:
 - CSM frame: wall time of ``render_final`` (``bpy.ops.render.render()``, as F12 does it;
   profiling off), median of N after one warm-up. A final render builds a fresh mesh cache,
   so it extracts and uploads every mesh.
-- CSM split: one more render with ``render_final(scene, profile=True)``; its
-  ``RenderResult`` carries the seconds of each step (``TIMED_STEPS``: scene read, mesh
+- CSM split: one more render with ``render_final(scene, profile=True)``, drawing every
+  pass (``engine.forget_final_render_passes``; meshes kept); its ``RenderResult`` carries the seconds of each step (``TIMED_STEPS``: scene read, mesh
   extraction + upload, planning, the GPU passes, read-back) and the bytes uploaded.
   Profiling waits for the GPU after each pass with a 1-pixel read; the three extra reads
   cost well under a millisecond. "blender" is what is left of the wall time (render-result
@@ -190,12 +190,26 @@ def time_animation(scene, engine_id, frames, label):
     return {"frames_s": times, "median_s": statistics.median(times)}
 
 
+def full_frames(scene, repeat):
+    """``repeat`` CSM renders that each draw every pass (shadow maps, G-buffer, AO) with the
+    meshes kept: what a frame costs when its view or scene changed. Seconds."""
+    from csm_engine.blender import engine
+    scene.render.engine = "CSM"
+    frames = []
+    for _ in range(repeat):
+        engine.forget_final_render_passes()
+        frames.append(render_once(scene).timings["wall"])
+    return frames
+
+
 def csm_split(scene, first=False):
-    """One profiled CSM render: (seconds per step, bytes of mesh data uploaded); see the
-    module docstring. ``first``: as a first render (every mesh read and uploaded)."""
+    """One profiled CSM render that draws every pass: (seconds per step, bytes of mesh
+    data uploaded); see the module docstring. ``first``: as a first render (every mesh
+    read and uploaded)."""
     from csm_engine.blender import engine
     from csm_engine.render.result import TIMED_STEPS
     scene.render.engine = "CSM"
+    engine.forget_final_render_passes()
     if first:
         engine.forget_final_render_meshes()
     result = render_once(scene, profile=True)
@@ -335,6 +349,8 @@ def compare_scene(name, quick, width, height, repeat, overrides=(), model_cache=
     triangles = scene_triangles(scene)
     log(f"scene '{name}': {triangles} triangles, {width}x{height}")
     csm = time_engine(scene, "CSM", repeat, "CSM")
+    csm["full_frame_s"] = statistics.median(full_frames(scene, repeat))
+    log(f"  CSM: every pass drawn, median {csm['full_frame_s']:.3f} s")
     split, upload_bytes = csm_split(scene)
     log("  CSM split (s): " + ", ".join(f"{k} {v:.4f}" for k, v in split.items()))
     log(f"scene '{name}': viewport redraws")
@@ -378,7 +394,11 @@ def scaling_run(sizes, width, height, repeat, overrides=()):
         triangles = scene_triangles(scene)
         rss_before = rss_mb()
         timing = time_engine(scene, "CSM", repeat, "CSM")
-        # The scaling sweep measures what a frame costs when its meshes are new.
+        # Frames that draw every pass: kept shadow maps and G-buffers would hide how the
+        # passes grow with triangles.
+        frames = full_frames(scene, repeat)
+        timing.update(frames_s=frames, median_s=statistics.median(frames))
+        # The scaling sweep's split: what a frame costs when its meshes are new.
         split, upload_bytes = csm_split(scene, first=True)
         rows.append({"target": target, "triangles": triangles, "objects": monkeys + 1,
                      "median_s": timing["median_s"], "frames_s": timing["frames_s"],
@@ -559,19 +579,24 @@ def markdown_tables(results):
            "(copies of one mesh once) and uploaded. Repeated F12: the median of the renders "
            "that follow, scene unchanged (meshes, shadow maps and G-buffer kept). Sun "
            "turned: the sun rotated half a degree before each F12, so every shadow map and "
-           "the lighting are drawn again (the G-buffer is kept).", "",
+           "the lighting are drawn again (the G-buffer is kept, except with image "
+           "textures). Every pass: each pass drawn again, meshes kept (what an F12 after "
+           "the camera moved costs).", "",
            "| scene | triangles | CSM first render | CSM repeated F12 | CSM sun turned "
-           "| EEVEE frame (1 sample) | EEVEE / CSM first | EEVEE / CSM repeated "
-           "| EEVEE / CSM sun turned |",
-           "|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+           "| CSM every pass | EEVEE frame (1 sample) | EEVEE / CSM first "
+           "| EEVEE / CSM repeated | EEVEE / CSM sun turned | EEVEE / CSM every pass |",
+           "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for s in results["scenes"]:
         first = s.get("first_ratio", s["eevee"]["median_s"] / s["csm"]["warmup_s"])
-        turned = s["csm"].get("sun_turned_s")
-        turned_ms = ms(turned) if turned else "-"
-        turned_ratio = f"{s['eevee']['median_s'] / turned:.1f}x" if turned else "-"
+        cells = []
+        for key in ("sun_turned_s", "full_frame_s"):
+            value = s["csm"].get(key)
+            cells.append((ms(value) if value else "-",
+                          f"{s['eevee']['median_s'] / value:.1f}x" if value else "-"))
         out.append(f"| {s['name']} | {s['triangles']:,} | {ms(s['csm']['warmup_s'])} | "
-                   f"{ms(s['csm']['median_s'])} | {turned_ms} | {ms(s['eevee']['median_s'])} | "
-                   f"{first:.1f}x | **{s['ratio']:.1f}x** | {turned_ratio} |")
+                   f"{ms(s['csm']['median_s'])} | {cells[0][0]} | {cells[1][0]} | "
+                   f"{ms(s['eevee']['median_s'])} | {first:.1f}x | **{s['ratio']:.1f}x** | "
+                   f"{cells[0][1]} | {cells[1][1]} |")
     for skipped in results.get("skipped", ()):
         out.append(f"| {skipped['name']} | skipped: {skipped['reason']} | | | |")
     animation = results.get("animation")
@@ -586,7 +611,8 @@ def markdown_tables(results):
                 "", f"EEVEE / CSM per animation frame: **{animation['ratio']:.1f}x**."]
     keys = ("scene_read", "mesh_upload", "python_setup", "shadow", "gbuffer", "depth_range",
             "ao", "lighting", "fxaa", "readback", "blender", "wall")
-    out += ["", "### Where CSM's frame goes (one profiled render, ms)", "",
+    out += ["", "### Where CSM's frame goes (one profiled render drawing every pass, "
+            "meshes kept, ms)", "",
             "| scene | scene read | mesh extraction + upload | planning (Python) | shadow "
             "passes | G-buffer | visible depth (SDSM) | AO | lighting | FXAA | read-back | "
             "Blender | wall |",
@@ -611,7 +637,7 @@ def markdown_tables(results):
                    f" ms | {v['frame_ms_median']:.0f} ms | {edit_text} |")
     rows = results.get("scaling") or []
     if rows:
-        out += ["", "### Scaling (CSM final frame)", "",
+        out += ["", "### Scaling (CSM final frame, every pass drawn, meshes kept)", "",
                 "| triangles | frame | mesh extraction + upload | shadow | G-buffer | "
                 "lighting | mesh data | process RSS |",
                 "|---:|---:|---:|---:|---:|---:|---:|---:|"]
