@@ -23,6 +23,30 @@ def render_scene(scene, width=320, height=240):
     return render_result(scene, width, height).images
 
 
+def viewport_frame(scene, renderer, cache, width, height):
+    """One viewport redraw of the scene camera's view, as ``view_draw`` draws it (no FXAA):
+    a snapshot, ``cache`` synced, ``renderer.draw_viewport`` into an offscreen float
+    target; returns its RGBA pixels (height, width, 4), bottom row first."""
+    import gpu
+    from csm_engine.blender import snapshot
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    camera = snapshot.camera_from_scene(scene, depsgraph, width, height)
+    snap = snapshot.take(depsgraph, camera, is_viewport=True)
+    cache.sync(snap.mesh_sources)
+    snap.mesh_sources = {}
+    offscreen = gpu.types.GPUOffScreen(width, height, format='RGBA32F')
+    try:
+        with offscreen.bind():
+            fb = gpu.state.active_framebuffer_get()
+            fb.clear(color=(0, 0, 0, 0))
+            renderer.draw_viewport(snap, cache, width, height, fxaa=False)
+            buffer = gpu.types.Buffer('FLOAT', width * height * 4)
+            fb.read_color(0, 0, width, height, 4, 0, 'FLOAT', data=buffer)
+    finally:
+        offscreen.free()
+    return np.frombuffer(buffer, np.float32).reshape(height, width, 4).copy()
+
+
 def load_png(path):
     """A PNG as Blender reads it: float32 (H, W, channels) in 0..1, top row first (Blender
     gives RGBA for 8-bit files; no colour management is applied to ``pixels``). The

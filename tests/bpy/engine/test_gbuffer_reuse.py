@@ -14,7 +14,7 @@ import pytest
 
 from csm_engine.blender import engine
 from csm_engine.render import pipeline
-from tests.bpy.bpy_helpers import render_result
+from tests.bpy.bpy_helpers import render_result, viewport_frame
 
 W, H = 96, 64
 
@@ -188,26 +188,8 @@ def test_textured_materials_never_keep_the_gbuffer(empty_scene):
     assert np.abs(blue - yellow).max() > 0.1
 
 
-def _viewport_frame(scene, renderer, cache, w=W, h=H):
-    """One viewport redraw of the scene camera's view (as view_draw does)."""
-    import gpu
-    from csm_engine.blender import snapshot
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    camera = snapshot.camera_from_scene(scene, depsgraph, w, h)
-    snap = snapshot.take(depsgraph, camera, is_viewport=True)
-    cache.sync(snap.mesh_sources)
-    snap.mesh_sources = {}
-    offscreen = gpu.types.GPUOffScreen(w, h, format='RGBA32F')
-    try:
-        with offscreen.bind():
-            fb = gpu.state.active_framebuffer_get()
-            fb.clear(color=(0, 0, 0, 0))
-            renderer.draw_viewport(snap, cache, w, h, fxaa=False)
-            buffer = gpu.types.Buffer('FLOAT', w * h * 4)
-            fb.read_color(0, 0, w, h, 4, 0, 'FLOAT', data=buffer)
-    finally:
-        offscreen.free()
-    return np.frombuffer(buffer, np.float32).reshape(h, w, 4).copy()
+def _viewport_frame(scene, renderer, cache):
+    return viewport_frame(scene, renderer, cache, W, H)
 
 
 def test_viewport_keeps_the_gbuffer_while_shadows_are_tuned(empty_scene):

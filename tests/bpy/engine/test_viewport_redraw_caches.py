@@ -7,12 +7,11 @@ does) redraw after each edit; every frame must equal a fresh pipeline's and fres
 frame of the same scene, and the edit must have changed the picture.
 """
 import bpy
-import gpu
 import numpy as np
 
-from csm_engine.blender import engine, mesh_cache, snapshot
+from csm_engine.blender import engine, mesh_cache
 from csm_engine.render import pipeline
-from tests.bpy.bpy_helpers import render_scene
+from tests.bpy.bpy_helpers import render_scene, viewport_frame
 
 W, H = 96, 64
 
@@ -64,22 +63,7 @@ class _Viewport:
 
 
 def _frame(scene, renderer, cache):
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    camera = snapshot.camera_from_scene(scene, depsgraph, W, H)
-    snap = snapshot.take(depsgraph, camera, is_viewport=True)
-    cache.sync(snap.mesh_sources)
-    snap.mesh_sources = {}
-    offscreen = gpu.types.GPUOffScreen(W, H, format='RGBA32F')
-    try:
-        with offscreen.bind():
-            fb = gpu.state.active_framebuffer_get()
-            fb.clear(color=(0, 0, 0, 0))
-            renderer.draw_viewport(snap, cache, W, H, fxaa=False)
-            buffer = gpu.types.Buffer('FLOAT', W * H * 4)
-            fb.read_color(0, 0, W, H, 4, 0, 'FLOAT', data=buffer)
-    finally:
-        offscreen.free()
-    return np.frombuffer(buffer, np.float32).reshape(H, W, 4).copy()
+    return viewport_frame(scene, renderer, cache, W, H)
 
 
 def test_every_edit_shows_in_the_next_redraw(empty_scene):
