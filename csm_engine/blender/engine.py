@@ -245,8 +245,7 @@ class CSMRenderEngine(bpy.types.RenderEngine):
     def view_update(self, context, depsgraph):
         if self.cache is None:
             self.cache = mesh_cache.MeshCache()
-        apply_depsgraph_updates(self.cache, depsgraph.updates)
-        self.snapshots.scene_changed = True
+        self.snapshots.scene_updated(self.cache, depsgraph.updates)
 
     def view_draw(self, context, depsgraph):
         import gpu
@@ -290,6 +289,12 @@ class ViewportSnapshots:
         self.snap = None
         self.scene_changed = True
         self._time = None
+
+    def scene_updated(self, cache, updates):
+        """What ``view_update`` does with the depsgraph's updates: invalidate what they
+        touch in ``cache``, and read the scene again at the next redraw."""
+        apply_depsgraph_updates(cache, updates)
+        self.scene_changed = True
 
     def frame(self, depsgraph, camera, cache):
         """This redraw's snapshot; ``cache`` is synced when the scene was read again. A

@@ -41,6 +41,7 @@ import numpy as np
 from .camera import CameraProjection, as_projection
 from .checks import finite, matrix4, vector3
 from .frame_layout import MAX_CASCADES, SPLIT_SCHEMES
+from .matrices import ArrayMemo
 
 MIN_CASCADE_RESOLUTION = 64          # texels; halving stops here (see cascade_resolutions)
 
@@ -380,24 +381,11 @@ def bounding_sphere(points):
     return best_centre + origin, best_radius
 
 
-# View-space slice corners (as bytes) -> their bounding sphere. The corners depend only on
-# the projection and the split distances, so a viewport redraw where only the camera moves
+# View-space slice corners -> their bounding sphere. The corners depend only on the
+# projection and the split distances, so a viewport redraw where only the camera moves
 # asks for the same spheres again; the exact search above costs ~0.5 ms a cascade.
-_VIEW_SPHERES = {}
 _VIEW_SPHERES_MAX = 64
-
-
-def _view_space_sphere(view_corners):
-    corners = np.ascontiguousarray(view_corners, dtype=np.float64)
-    key = corners.tobytes()
-    sphere = _VIEW_SPHERES.get(key)
-    if sphere is None:
-        if len(_VIEW_SPHERES) >= _VIEW_SPHERES_MAX:
-            _VIEW_SPHERES.clear()
-        centre, radius = bounding_sphere(corners)
-        centre.setflags(write=False)
-        sphere = _VIEW_SPHERES[key] = (centre, radius)
-    return sphere
+_view_space_sphere = ArrayMemo(bounding_sphere, _VIEW_SPHERES_MAX)
 
 
 # (projection, near depth, far depth) -> the slice's view-space corners and, once asked

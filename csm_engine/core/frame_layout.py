@@ -206,6 +206,16 @@ class UniformLayout:
             raise KeyError(f"{self.type_name} has no field '{name}'; fields: "
                            f"{', '.join(self._by_name)}") from None
 
+    def field_bytes(self, data, names):
+        """The bytes of some single (non-array, non-struct) fields of a packed ``data``:
+        a cheap value to tell whether two packed blocks agree on those fields."""
+        parts = []
+        for name in names:
+            field = self.field(name)
+            size = _BASIC[field.kind][2]
+            parts.append(data[field.offset // 4:(field.offset + size) // 4].tobytes())
+        return b"".join(parts)
+
     def new_data(self):
         """A zeroed float32 buffer of this struct's std140 size (ints share its bytes)."""
         return np.zeros(self.size // 4, dtype=np.float32)

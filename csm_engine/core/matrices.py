@@ -46,20 +46,29 @@ def inverse_rigid(m):
     return out
 
 
-# clip_from_view bytes -> its inverse: the lens does not change while the view moves.
-_PROJECTION_INVERSES = {}
-_PROJECTION_INVERSES_MAX = 16
+class ArrayMemo:
+    """A pure function of one float64 array, remembered by the array's bytes (at most
+    ``size`` results; all forgotten when full). Results are made read-only, so a caller
+    cannot change what the next caller gets."""
+
+    def __init__(self, function, size):
+        self.function, self.size, self.held = function, size, {}
+
+    def __call__(self, array):
+        array = np.ascontiguousarray(array, dtype=np.float64)
+        key = array.tobytes()
+        result = self.held.get(key)
+        if result is None:
+            if len(self.held) >= self.size:
+                self.held.clear()
+            result = self.function(array)
+            for part in (result if isinstance(result, tuple) else (result,)):
+                if isinstance(part, np.ndarray):
+                    part.setflags(write=False)
+            self.held[key] = result
+        return result
 
 
-def inverse_projection(clip_from_view):
-    """``inv(clip_from_view)``, kept per lens (read-only array)."""
-    clip_from_view = np.ascontiguousarray(clip_from_view, dtype=np.float64)
-    key = clip_from_view.tobytes()
-    held = _PROJECTION_INVERSES.get(key)
-    if held is None:
-        if len(_PROJECTION_INVERSES) >= _PROJECTION_INVERSES_MAX:
-            _PROJECTION_INVERSES.clear()
-        held = np.linalg.inv(clip_from_view)
-        held.setflags(write=False)
-        _PROJECTION_INVERSES[key] = held
-    return held
+# The lens does not change while the view moves: its inverse is kept per lens.
+inverse_projection = ArrayMemo(np.linalg.inv, 16)
+inverse_projection.__doc__ = "``inv(clip_from_view)``, kept per lens (read-only array)."

@@ -29,7 +29,7 @@ from ..core.camera import world_positions
 from ..core.shadow_plan import (CASCADE_LINE_COLORS, depth_blocks_from_reduction,
                                 front_to_back, gbuffer_plan, instance_bounds,
                                 layout_atlas, pack_frame, plan_shadows)
-from ..core.frame_layout import _BASIC, FRAME_LAYOUT
+from ..core.frame_layout import FRAME_LAYOUT
 from ..core.material_layout import pack_material
 from . import shaders
 from .gpu_mesh import MaterialInfo
@@ -81,14 +81,12 @@ _AO_FRAME_FIELDS = ("ao_enabled", "ao_distance", "ao_strength", "ao_pixels_per_u
                     "ao_view_ray", "is_perspective", "viewport_size", "view_from_world")
 
 
-def _frame_bytes(frame_data, names):
-    """The bytes of some single fields of a packed frame block, to compare frames by."""
-    parts = []
-    for name in names:
-        field = FRAME_LAYOUT.field(name)
-        size = _BASIC[field.kind][2]
-        parts.append(frame_data[field.offset // 4:(field.offset + size) // 4].tobytes())
-    return b"".join(parts)
+def _programs_key():
+    """Which compiled programs a frame draws with (F5 replaces them), compiled now if they
+    were not yet, so a record made with it names the programs that drew it."""
+    library = shaders.LIBRARY
+    library.get("gbuffer")
+    return id(library), library.generation
 
 
 def _same_textures(cache, textures):
@@ -240,6 +238,9 @@ class Pipeline:
         self.gbuffer_kept = False   # this frame's G-buffer is the frame before's (see draw)
         self.shadow_tiles = {"drawn": 0, "skipped": 0}   # of the last frame
         self._held_lists = None     # _DrawLists of the last frame's draw items
+        self._held_instances = None   # _InstanceArrays of the last frame
+        self._held_draws = None     # the last frame's draw items and what they came from
+        self._held_signatures = {}  # instance key -> (draw-list entry, caster signature)
         self._depth_pairs = None    # the last Fit to Visible Depth read-back (benchmark)
 
     # -- resources ---------------------------------------------------------------------
@@ -468,7 +469,7 @@ class Pipeline:
             # re-render), nor is its AO (see _ambient_occlusion).
             targets = (albedo, normal, view_depth, emission, depth)
             contents = self._gbuffer_contents(snap, cache, items, order, world_from_objects,
-                                              frame_data, self._zeroed_emission is None)
+                                              frame_data, lists.writes_emission)
             held = self._textures.get("gbuffer_contents")
             self.gbuffer_kept = False
             if not self.skip_gpu_calls and contents is not None and held is not None and \
@@ -618,7 +619,7 @@ class Pipeline:
         search_fb = self._framebuffer("ao_half", colors=(search,))
         blurred_fb = self._framebuffer("ao", colors=(blurred,))
         library = shaders.LIBRARY
-        inputs = (id(library), library.generation, _frame_bytes(frame_data, _AO_FRAME_FIELDS))
+        inputs = (_programs_key(), FRAME_LAYOUT.field_bytes(frame_data, _AO_FRAME_FIELDS))
         held = self._textures.get("ao_contents")
         if self.gbuffer_kept and held is not None and held[0] is blurred and \
                 held[1] == inputs:
@@ -686,7 +687,7 @@ class Pipeline:
         meshes = [cache.meshes.get(key) for key in keys]
         world_from_objects = np.array([i.world_from_object for i in instances],
                                       dtype=np.float64).reshape(-1, 4, 4)
-        held = getattr(self, "_held_instances", None)
+        held = self._held_instances
         if held is None or not held.holds(keys, meshes, world_from_objects):
             held = self._held_instances = _InstanceArrays(snap, cache, keys, meshes,
                                                           world_from_objects)
@@ -711,7 +712,7 @@ class Pipeline:
         signatures = []
         # A mesh's signature is kept with its draw lists (``_draw_items``): the same lists
         # (the same object) have the same signature.
-        held = getattr(self, "_held_signatures", {})
+        held = self._held_signatures
         kept = {}
         for instance, entry in zip(snap.instances, items):
             if instance.key not in per_key:
@@ -738,10 +739,8 @@ class Pipeline:
         when a draw reads an image (its pixels may have changed in place). In the viewport
         the camera is looked at first, so a redraw of a moving view pays for little else
         (its record holds only the camera, which the next redraw of that view completes)."""
-        library = shaders.LIBRARY
-        library.get("gbuffer")        # compiled now, so the generation is the one drawn with
-        camera = (id(library), library.generation, writes_emission,
-                  _frame_bytes(frame_data, _GBUFFER_FRAME_FIELDS))
+        camera = (_programs_key(), writes_emission,
+                  FRAME_LAYOUT.field_bytes(frame_data, _GBUFFER_FRAME_FIELDS))
         held = self._textures.get("gbuffer_contents")
         # NOTE: the benchmark's Python-only redraw (``skip_gpu_calls``) repeats the view of
         # the redraw before; it pays what a redraw of a moving view pays.
@@ -777,7 +776,7 @@ class Pipeline:
             return range(0)
         if tile.cascade is None:    # spot tiles: no caster culling (few, small frusta)
             return range(len(instances))
-        held = getattr(self, "_held_instances", None)
+        held = self._held_instances
         checked = held is not None and held.bounds_lo_hi is bounds_lo_hi and held.bounds_checked
         mask = cascades.aabbs_in_cascade(bounds_lo_hi[0], bounds_lo_hi[1], tile.cascade,
                                          checked=checked)
@@ -789,7 +788,7 @@ class Pipeline:
         edit makes new ones, see MeshCache.sync) and, for every image, the same GPU texture
         (an edited image's texture is dropped from the cache)."""
         keys = tuple(instance.key for instance in snap.instances)
-        held = getattr(self, "_held_draws", None)
+        held = self._held_draws
         if held is not None and held[0] == keys and held[1] is white and \
                 all(cache.meshes.get(key) is mesh and
                     (mesh is None or mesh.materials is materials)

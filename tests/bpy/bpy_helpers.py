@@ -18,6 +18,19 @@ def render_result(scene, width=320, height=240):
     return result
 
 
+def cube_on_plane(scene):
+    """A 12 m ground plane, a 2 m cube standing 0.2 m above it, a sun (35, 25 degrees) and
+    the scene camera looking down at both from (7, -7, 5). Returns (cube, sun)."""
+    bpy.ops.mesh.primitive_plane_add(size=12)
+    bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1.2))
+    cube = bpy.context.object
+    bpy.ops.object.light_add(type='SUN', rotation=(np.radians(35), np.radians(25), 0))
+    sun = bpy.context.object
+    bpy.ops.object.camera_add(location=(7, -7, 5), rotation=(np.radians(63), 0, np.radians(45)))
+    scene.camera = bpy.context.object
+    return cube, sun
+
+
 def render_scene(scene, width=320, height=240):
     """The passes of one CSM render (see ``render_result``)."""
     return render_result(scene, width, height).images

@@ -235,9 +235,7 @@ def viewport_cost(scene, width, height, redraws):
     target = gpu.types.GPUOffScreen(width, height)
 
     def handler(_scene, depsgraph):
-        """What view_update does: invalidations, and the scene read again next redraw."""
-        engine.apply_depsgraph_updates(cache, depsgraph.updates)
-        snapshots.scene_changed = True
+        snapshots.scene_updated(cache, depsgraph.updates)      # as view_update does
     bpy.app.handlers.depsgraph_update_post.append(handler)
 
     def redraw(camera, python_only=False):

@@ -12,25 +12,19 @@ import numpy as np
 
 from csm_engine.blender import engine
 from csm_engine.render import gpu_mesh, pipeline
-from tests.bpy.bpy_helpers import render_result
+from tests.bpy.bpy_helpers import cube_on_plane, render_result
 
 W, H = 96, 64
 
 
 def _scene(empty_scene):
     scene = empty_scene
-    bpy.ops.mesh.primitive_plane_add(size=12)
-    bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1.2))
-    cube = bpy.context.object
+    cube, _sun = cube_on_plane(scene)
     subsurf = cube.modifiers.new("subdivide", 'SUBSURF')
     subsurf.levels = subsurf.render_levels = 1
     material = bpy.data.materials.new("cube")
     _set_colour(material, (0.8, 0.2, 0.2))
     cube.data.materials.append(material)
-    bpy.ops.object.light_add(type='SUN', rotation=(np.radians(35), np.radians(25), 0))
-    bpy.ops.object.camera_add(location=(7, -7, 5),
-                              rotation=(np.radians(63), 0, np.radians(45)))
-    scene.camera = bpy.context.object
     return scene, cube
 
 

@@ -14,16 +14,14 @@ import pytest
 
 from csm_engine.blender import engine
 from csm_engine.render import pipeline
-from tests.bpy.bpy_helpers import render_result, viewport_frame
+from tests.bpy.bpy_helpers import cube_on_plane, render_result, viewport_frame
 
 W, H = 96, 64
 
 
 def _scene(empty_scene):
     scene = empty_scene
-    bpy.ops.mesh.primitive_plane_add(size=12)
-    bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1.2))
-    cube = bpy.context.object
+    cube, sun = cube_on_plane(scene)
     material = bpy.data.materials.new("cube")
     if material.node_tree is None:       # before 5.0 a new material has no nodes
         material.use_nodes = True
@@ -34,11 +32,6 @@ def _scene(empty_scene):
                                      rotation=(np.radians(90), 0, np.radians(225)))
     wall = bpy.context.object
     wall.data.materials.append(bpy.data.materials.new("wall"))
-    bpy.ops.object.light_add(type='SUN', rotation=(np.radians(35), np.radians(25), 0))
-    sun = bpy.context.object
-    bpy.ops.object.camera_add(location=(7, -7, 5),
-                              rotation=(np.radians(63), 0, np.radians(45)))
-    scene.camera = bpy.context.object
     scene.csm.ao_distance = 1.0          # AO visible where the cube meets the ground
     scene.world = bpy.data.worlds.new("sky")
     scene.world.color = (0.4, 0.4, 0.4)  # ambient light, which AO darkens

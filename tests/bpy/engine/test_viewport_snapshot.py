@@ -7,22 +7,14 @@ import numpy as np
 import pytest
 
 from csm_engine.blender import engine, mesh_cache, snapshot
-from tests.bpy.bpy_helpers import render_scene
+from tests.bpy.bpy_helpers import cube_on_plane, render_scene
 
 W, H = 64, 48
 
 
 def _scene(empty_scene):
-    scene = empty_scene
-    bpy.ops.mesh.primitive_plane_add(size=10)
-    bpy.ops.mesh.primitive_cube_add(location=(0, 0, 1))
-    cube = bpy.context.object
-    bpy.ops.object.light_add(type='SUN', rotation=(0.6, 0.3, 0))
-    sun = bpy.context.object
-    bpy.ops.object.camera_add(location=(6, -6, 5), rotation=(np.radians(60), 0,
-                                                             np.radians(45)))
-    scene.camera = bpy.context.object
-    return scene, cube, sun
+    cube, sun = cube_on_plane(empty_scene)
+    return empty_scene, cube, sun
 
 
 @pytest.fixture
@@ -34,8 +26,7 @@ def viewport(empty_scene):
     snapshots = engine.ViewportSnapshots()
 
     def handler(_scene, depsgraph):          # what view_update does
-        engine.apply_depsgraph_updates(cache, depsgraph.updates)
-        snapshots.scene_changed = True
+        snapshots.scene_updated(cache, depsgraph.updates)
     bpy.app.handlers.depsgraph_update_post.append(handler)
 
     def frame():
