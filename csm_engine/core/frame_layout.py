@@ -333,6 +333,9 @@ SHADOW_TILE_LAYOUT = UniformLayout("ShadowTileData", (
     ("resolution", "float", "tile width and height (texels)"),
     ("texel_world", "float", "orthographic: scene units per texel; perspective: per unit "
                              "of distance from the light"),
+    ("texel_world_xy", "vec2", "texel_world along the tile's x and y: a cascade fitted to "
+                               "its visible receivers is rectangular (soft shadows size "
+                               "their penumbrae in the world, per axis)"),
     ("light_near", "float", "light's near plane (scene units from the light)"),
     ("light_far", "float", "light's far plane (scene units from the light)"),
     ("is_perspective", "int", "1 perspective (spot) tile, 0 orthographic (sun cascade)"),

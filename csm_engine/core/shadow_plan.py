@@ -41,6 +41,15 @@ class ShadowTile:
     origin: tuple = (0, 0)     # atlas texels
     cascade: object = None     # cascades.CascadeFit for sun tiles
     display_near: float = 0.0  # where the scene starts in this light's depth (debug view)
+    # Scene units per texel along the tile's x and y. Fit to Visible Depth makes a cascade's
+    # box rectangular, so its texels are too; texel_world is the larger. None: square.
+    texel_world_xy: tuple = None
+
+    def texel_world_per_axis(self):
+        """(x, y) scene units per texel (perspective: per unit of distance)."""
+        if self.texel_world_xy is None:
+            return (self.texel_world, self.texel_world)
+        return self.texel_world_xy
 
 
 @dataclass
@@ -187,7 +196,8 @@ def plan_shadows(snap, bounds, depth_blocks=None):
         bands[:count] = cascades.blend_band_widths(splits, float(s.blend_band))
         for fit in result.cascades:
             tiles.append(ShadowTile(fit.clip_from_world, fit.resolution, fit.texel_size_world,
-                                    fit.near, fit.far, False, cascade=fit))
+                                    fit.near, fit.far, False, cascade=fit,
+                                    texel_world_xy=tuple(float(t) for t in fit.texel_size_xy)))
     else:
         count = 0
     for index, spot in enumerate(snap.spots[:MAX_SPOT_LIGHTS]):
@@ -380,7 +390,9 @@ def _plan_fields(snap, plan):
                     for i in range(MAX_CASCADES)]
     tile_rows = [dict(shadow_from_world=WINDOW_FROM_CLIP @ tile.clip_from_world,
                       atlas_origin=tile.origin, resolution=tile.resolution,
-                      texel_world=tile.texel_world, light_near=tile.near, light_far=tile.far,
+                      texel_world=tile.texel_world,
+                      texel_world_xy=tile.texel_world_per_axis(),
+                      light_near=tile.near, light_far=tile.far,
                       is_perspective=int(tile.is_perspective), display_near=tile.display_near,
                       window_normal_from_world=window_normal_from_world(tile))
                  for tile in plan.tiles]

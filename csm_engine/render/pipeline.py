@@ -316,7 +316,10 @@ class Pipeline:
                 if message not in self.warnings:
                     self.warnings.append(message)
                 for tile in plan.tiles:
-                    tile.texel_world *= 2.0 if tile.resolution > 64 else 1.0
+                    if tile.resolution > 64:
+                        tile.texel_world *= 2.0
+                        if tile.texel_world_xy is not None:
+                            tile.texel_world_xy = tuple(2.0 * t for t in tile.texel_world_xy)
                     tile.resolution = max(tile.resolution // 2, 64)
 
     def _sync(self, fb, name, start):

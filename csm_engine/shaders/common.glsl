@@ -130,31 +130,41 @@ float shadow_tap_bilinear(vec2 origin, float last_texel, vec2 tap, vec2 receiver
   return mix(mix(a, b, f.x), mix(d, e, f.x), f.y);
 }
 
-/* Penumbra radius in texels for a receiver at `receiver_linear` behind blockers at
- * `blocker_linear` (distances from the light). Sun (orthographic): the sun's disk of
- * half-angle h spreads an edge over 2 tan(h) (receiver - blocker) in the world. Spot
- * (perspective): a sphere of radius R at the light spreads it over 2 R (receiver - blocker)
- * / blocker; a texel there is texel_world * receiver wide. */
-float penumbra_radius_texels(ShadowTileData tile, float light_size, float receiver_linear,
-                             float blocker_linear, float texel_world)
+/* Penumbra radius, in texels along the tile's x and y, for a receiver at `receiver_linear`
+ * behind blockers at `blocker_linear` (distances from the light). Sun (orthographic): the
+ * sun's disk of half-angle h spreads an edge over 2 tan(h) (receiver - blocker) in the
+ * world. Spot (perspective): a sphere of radius R at the light spreads it over 2 R (receiver
+ * - blocker) / blocker; a texel there is texel_world * receiver wide. Per axis because a
+ * cascade fitted to its visible receivers has rectangular texels: one texel count for both
+ * axes made penumbrae half as wide as Cycles' along the finer one. */
+vec2 penumbra_radius_texels(ShadowTileData tile, float light_size, float receiver_linear,
+                            float blocker_linear, vec2 texel_world_xy)
 {
   float distance = max(receiver_linear - blocker_linear, 0.0);
-  if (tile.is_perspective != 0) {
-    return light_size * distance / max(blocker_linear, 1e-4) / texel_world;
-  }
-  return light_size * distance / texel_world;
+  float world = tile.is_perspective != 0 ? light_size * distance / max(blocker_linear, 1e-4) :
+                                           light_size * distance;
+  return world / texel_world_xy;
+}
+
+/* `radius` scaled down so that neither axis is wider than SOFT_RADIUS_LIMIT_TEXELS. */
+vec2 limit_soft_radius(vec2 radius)
+{
+  float widest = max(radius.x, radius.y);
+  return widest > SOFT_RADIUS_LIMIT_TEXELS ? radius * (SOFT_RADIUS_LIMIT_TEXELS / widest) :
+                                             radius;
 }
 
 float soft_shadow(ShadowTileData tile, float light_size, vec2 texel, float compare,
-                  vec2 depth_per_texel, float receiver_linear, float texel_world)
+                  vec2 depth_per_texel, float receiver_linear, vec2 texel_world_xy)
 {
   vec2 origin = tile.atlas_origin;
   float last_texel = tile.resolution - 1.0;
   /* 1. Blocker search: where could something stand between this point and the light?
    * Up to the nearest depth anything in this tile has (display_near). */
   float nearest = max(tile.display_near, tile.light_near);
-  float search = clamp(penumbra_radius_texels(tile, light_size, receiver_linear, nearest,
-                                              texel_world), 1.0, SOFT_RADIUS_LIMIT_TEXELS);
+  vec2 search = max(limit_soft_radius(penumbra_radius_texels(
+                        tile, light_size, receiver_linear, nearest, texel_world_xy)),
+                    vec2(1.0));
   float rotation = sample_rotation();
   float blocker_window = 0.0;
   float blockers = 0.0;
@@ -173,13 +183,13 @@ float soft_shadow(ShadowTileData tile, float light_size, vec2 texel, float compa
   }
   /* 2. The penumbra from the blockers' mean distance; 3. a filter that wide. */
   float blocker_linear = shadow_linear_depth(blocker_window / blockers, tile);
-  float radius = min(penumbra_radius_texels(tile, light_size, receiver_linear, blocker_linear,
-                                            texel_world), SOFT_RADIUS_LIMIT_TEXELS);
+  vec2 radius = limit_soft_radius(penumbra_radius_texels(tile, light_size, receiver_linear,
+                                                        blocker_linear, texel_world_xy));
   /* A penumbra narrower than a texel is one bilinear tap (an edge spread over +-0.5
    * texel); wider ones, a disk of bilinear taps as wide as the penumbra (the sun's disk
    * gives the same profile: the part of a disk an edge covers). */
-  radius = radius - 0.25;
-  if (radius < 0.5) {
+  radius = max(radius - 0.25, vec2(0.0));
+  if (max(radius.x, radius.y) < 0.5) {
     return shadow_tap_bilinear(origin, last_texel, texel, texel, compare, depth_per_texel);
   }
   float lit = 0.0;
@@ -228,7 +238,9 @@ float shadow_tile_visibility(ShadowTileData tile, vec3 p, vec3 n, float n_dot_l,
   vec2 texel = s.xy * tile.resolution;
 
 #if SHADOW_FILTER == FILTER_SOFT
-  return soft_shadow(tile, light_size, texel, compare, depth_per_texel, receiver, texel_world);
+  vec2 texel_world_xy = tile.texel_world_xy * (texel_world / tile.texel_world);
+  return soft_shadow(tile, light_size, texel, compare, depth_per_texel, receiver,
+                     texel_world_xy);
 #elif SHADOW_FILTER == FILTER_HARD
   return shadow_tap(origin, last_texel, texel, texel, compare, depth_per_texel);
 #else
