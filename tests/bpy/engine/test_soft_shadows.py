@@ -69,6 +69,30 @@ def test_penumbra_widens_with_the_blockers_height_and_the_suns_angle(plates):
     assert high3 == pytest.approx(0.8 * 2.0 * 4.0 * math.tan(math.radians(1.5)), rel=0.5)
 
 
+def test_penumbrae_are_as_wide_along_both_image_axes(plates):
+    """The view is twice as wide as it is tall, so Fit to Visible Depth fits each cascade to
+    a 2:1 rectangle of receivers and its texels are finer along y than along x. Penumbrae
+    are sized in the world, so the high plate's lower edge (measured down a column) has the
+    same penumbra as its left edge (along a row); sizing both in x texels made the first
+    about half as wide."""
+    scene, sun = plates
+    sun.data.angle = math.radians(10.0)
+    assert scene.csm.fit_to_visible
+    vis = ground_visibility(scene)
+    centre_x = int(WIDTH / 2 + PLATE_X[1] * PIXELS_PER_UNIT)
+    left_edge = int(WIDTH / 2 + (PLATE_X[1] - 1.0) * PIXELS_PER_UNIT)
+    lower_edge = int(HEIGHT / 2 - 1.0 * PIXELS_PER_UNIT)
+    # Profiles averaged over 11 rows / columns through the plate's middle (the soft filter's
+    # per-pixel rotation makes single pixels grainy), 20 pixels either side of the edge.
+    along_row = vis[HEIGHT // 2 - 5:HEIGHT // 2 + 6, left_edge - 20:left_edge + 20].mean(axis=0)
+    down_column = vis[lower_edge - 20:lower_edge + 20, centre_x - 5:centre_x + 6].mean(axis=1)
+    across_x, across_y = (np.count_nonzero((p > 0.05) & (p < 0.95)) / PIXELS_PER_UNIT
+                          for p in (along_row, down_column))
+    expected = 0.8 * 2.0 * HEIGHTS[1] * math.tan(math.radians(5.0))
+    assert across_y == pytest.approx(across_x, rel=0.2), (across_y, across_x)
+    assert across_y == pytest.approx(expected, rel=0.35), (across_y, expected)
+
+
 def test_the_soft_umbra_stays_dark_and_open_ground_stays_lit(plates):
     scene, sun = plates
     sun.data.angle = math.radians(3.0)
