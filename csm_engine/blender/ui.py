@@ -37,6 +37,7 @@ def draw_filtering(layout, csm):
     sub = col.column()
     sub.active = csm.shadow_filter == 'PCF'
     sub.prop(csm, "pcf_radius")
+    sub.prop(csm, "pcf_sharpen")
     sub.prop(csm, "pcf_pattern")
     col.prop(csm, "blend_band")
 

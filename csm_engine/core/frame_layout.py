@@ -393,6 +393,7 @@ FRAME_LAYOUT = UniformLayout("FrameData", (
     ("fade_start_depth", "float", "view depth where shadows begin to fade out (scene units)"),
     ("pcf_radius_texels", "float", "PCF kernel radius, a whole number of texels"),
     ("pcf_pattern", "int", "PCF_* tap pattern"),
+    ("pcf_sharpen", "float", "PCF edge steepening around visibility 0.5 (1 = none)"),
     ("depth_bias_texels", "float", "constant depth bias (shadow texels)"),
     ("slope_bias_texels", "float", "depth bias per unit of tan(light angle) (texels)"),
     ("normal_offset_texels", "float", "lookup moved along the normal (shadow texels)"),

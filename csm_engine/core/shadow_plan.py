@@ -443,6 +443,7 @@ def _snapshot_fields(snap):
         sun_color=sun.color if sun is not None else (0.0, 0.0, 0.0),
         pcf_radius_texels=s.pcf_radius,
         pcf_pattern=PCF_PATTERN_INDEX[s.pcf_pattern],
+        pcf_sharpen=s.pcf_sharpen,
         depth_bias_texels=s.depth_bias,
         slope_bias_texels=s.slope_bias,
         normal_offset_texels=s.normal_offset,

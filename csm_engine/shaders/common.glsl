@@ -296,7 +296,14 @@ float shadow_tile_visibility(ShadowTileData tile, vec3 p, vec3 n, float n_dot_l,
     lit += shadow_tap(origin, last_texel, texel + r * TAP_PATTERN_OFFSETS[k], texel, compare,
                       depth_per_texel);
   }
-  return lit / float(last >= 0 ? (last * last) : taps);
+  /* PCF Sharpen: steeper around 0.5, so the edge stays where the kernel smoothed it to
+   * (no texel stair steps) while its ramp narrows, and a kernel reaching a little over a
+   * shadow edge or onto a step beside lit ground leaves that ground fully lit (the plain
+   * 3x3 ramp leaves faint stripes along voxel edges). After Unreal's Shadow Filter
+   * Sharpen. Off (1) by default: it also thresholds the partial shadows that PCF makes of
+   * alpha-hashed casters. */
+  float filtered = lit / float(last >= 0 ? (last * last) : taps);
+  return clamp((filtered - 0.5) * frame.pcf_sharpen + 0.5, 0.0, 1.0);
 #endif
 }
 

@@ -239,7 +239,7 @@ def _snapshot_and_plan():
                              world_from_view=np.eye(4) + 0.1 * rng.normal(size=(4, 4)),
                              position=(1.0, 2.0, 3.0), forward=(0.0, 1.0, 0.0),
                              is_perspective=True, width=640, height=360)
-    settings = SimpleNamespace(fade_out=True, fade_fraction=0.25, pcf_radius=2,
+    settings = SimpleNamespace(fade_out=True, fade_fraction=0.25, pcf_radius=2, pcf_sharpen=2.5,
                                pcf_pattern="CROSS5", depth_bias=0.5, slope_bias=1.5,
                                normal_offset=0.75, debug_view="TEXEL_DENSITY",
                                debug_shadow_map=3, debug_inset=True)
@@ -273,6 +273,7 @@ def test_pack_frame_fills_the_frame_block_by_name():
     assert frame["cascade_count"] == 2 and frame["shadow_distance"] == 40.0
     assert frame["fade_start_depth"] == 30.0
     assert frame["pcf_radius_texels"] == 2.0 and frame["pcf_pattern"] == 1
+    assert frame["pcf_sharpen"] == 2.5
     assert (frame["depth_bias_texels"], frame["slope_bias_texels"],
             frame["normal_offset_texels"]) == (0.5, 1.5, 0.75)
     assert frame["point_light_count"] == 1 and frame["spot_light_count"] == 2

@@ -15,7 +15,7 @@ from csm_engine.core.frame_layout import FRAME_LAYOUT
 SETTINGS = dict(
     cascade_count=3, split_scheme="HYBRID", split_lambda=0.5, manual_splits=(0.1, 0.3, 0.6),
     shadow_distance=0.0, resolution=2048, equal_resolution=False, stabilize=True,
-    fade_out=True, fade_fraction=0.1, pcf_radius=1, pcf_pattern="GRID", depth_bias=1.0,
+    fade_out=True, fade_fraction=0.1, pcf_radius=1, pcf_pattern="GRID", pcf_sharpen=3.0, depth_bias=1.0,
     slope_bias=1.0, normal_offset=0.5, blend_band=0.1, occluder_margin_auto=True,
     occluder_margin=0.0, freeze_cascades=False, cull_front_faces=False, debug_view="NONE",
     debug_shadow_map=0, debug_inset=False, ambient_strength=1.0)

@@ -179,6 +179,34 @@ def test_larger_pcf_radius_widens_the_penumbra(pillar_field):
     assert counts[1] < counts[2], counts
 
 
+def test_pcf_sharpen_keeps_the_edge_and_narrows_its_ramp(pillar_field):
+    """PCF Sharpen (off by default) steepens the filtered edge around 0.5: every pixel
+    stays on its side of the edge (the same pixels are shadowed), the ramp gets narrower,
+    and lit ground that the 3x3 kernel reached from a shadow edge or a box's base becomes
+    fully lit."""
+    scene, _ = pillar_field
+    scene.csm.fade_out = False
+    scene.csm.blend_band = 0.0
+    assert scene.csm.pcf_sharpen == 1.0 and scene.csm.pcf_radius == 1
+
+    def visibility(sharpen):
+        scene.csm.pcf_sharpen = sharpen
+        images = render_scene(scene, 480, 320)
+        return images["aux"][..., 0], images["aux"][..., 3] > 0.5
+
+    plain, covered = visibility(1.0)
+    sharp, _ = visibility(3.0)
+    assert np.array_equal((plain < 0.5)[covered], (sharp < 0.5)[covered])
+    partial_plain = np.count_nonzero(((plain > 0.02) & (plain < 0.98))[covered])
+    partial_sharp = np.count_nonzero(((sharp > 0.02) & (sharp < 0.98))[covered])
+    assert partial_plain > 200, partial_plain
+    assert partial_sharp < 0.5 * partial_plain, (partial_sharp, partial_plain)
+    # The plain kernel's spill: lit pixels just short of 1. Sharpened, they are 1.
+    spill = covered & (plain > 5.0 / 6.0) & (plain < 0.999)
+    assert np.count_nonzero(spill) > 50
+    assert np.all(sharp[spill] >= 0.999)
+
+
 def test_stabilized_shadows_hold_still_while_the_camera_moves_less_than_a_texel(empty_scene):
     scene = empty_scene
     add_ground(200)
