@@ -708,6 +708,9 @@ def _add_point_light(light, collection, name):
     data.color = light.color.as_tuple()
     data.energy = POINT_LIGHT_WATTS
     data.shadow_soft_size = POINT_LIGHT_SOFT_SIZE
+    # The course's point lights cast no shadows (scene-format.md); Blender's own point
+    # lights cast cube-map shadows as in EEVEE.
+    data.use_shadow = False
     if hasattr(data, "use_custom_distance"):
         data.use_custom_distance = True
         data.cutoff_distance = light.radius

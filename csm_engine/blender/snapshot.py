@@ -290,6 +290,9 @@ def take(depsgraph, camera, is_viewport=False):
     for mesh_instance, matrix in zip(snap.instances,
                                      np.array(matrices, dtype=np.float64).reshape(-1, 4, 4)):
         mesh_instance.world_from_object = matrix
+    # Shadow-casting point lights first: the plan gives the first ones cube maps, and the
+    # lighting pass loops over them apart from the rest (a stable sort keeps their order).
+    snap.points.sort(key=lambda light: not light.casts_shadow)
     for kind, lights, limit in (("point", snap.points, MAX_POINT_LIGHTS),
                                 ("spot", snap.spots, MAX_SPOT_LIGHTS)):
         if len(lights) > limit:
@@ -316,8 +319,11 @@ def _add_light(snap, obj, world_from_light, light_threshold=DEFAULT_LIGHT_THRESH
     falloff = light_falloff(light, snap.settings.light_falloff)
     radius = _light_radius(light, falloff, light_threshold)
     if light.type == 'POINT':
-        snap.points.append(PointLight(position, _local_light_color(light, falloff), radius,
-                                      falloff))
+        snap.points.append(PointLight(
+            position, _local_light_color(light, falloff), radius, falloff,
+            casts_shadow=casts_shadow,
+            clip_start=float(getattr(light, "shadow_buffer_clip_start", 0.05) or 0.05),
+            source_radius=float(getattr(light, "shadow_soft_size", 0.0))))
     else:
         rotation = world_from_light.copy()
         for c in range(3):

@@ -1061,6 +1061,57 @@ def spot_light_matrices(world_from_light, spot_angle_rad, clip_start, clip_end):
     return light_from_world, clip_from_light
 
 
+# A point light's six cube faces, in the order the lighting shader picks them: the axis
+# (0 x, 1 y, 2 z) and the sign of the direction from the light each face looks along.
+POINT_LIGHT_FACES = ((0, 1.0), (0, -1.0), (1, 1.0), (1, -1.0), (2, 1.0), (2, -1.0))
+
+
+def point_light_face_angle(resolution, margin_texels):
+    """Full field of view (radians) of one cube face of ``resolution`` texels: 90 degrees
+    plus ``margin_texels`` on every side, so a filter's taps near a face's edge still read
+    rendered texels (the shader picks the face by the largest axis, i.e. inside 90)."""
+    return 2.0 * math.atan(1.0 / (1.0 - 2.0 * margin_texels / resolution))
+
+
+def point_light_face_matrices(position, face, angle_rad, clip_start, clip_end):
+    """``(light_from_world, clip_from_light)`` of cube face ``face`` (an index into
+    POINT_LIGHT_FACES) of a point light at ``position``: a square perspective map looking
+    from the light along that axis."""
+    axis, sign = POINT_LIGHT_FACES[face]
+    look = np.zeros(3)
+    look[axis] = sign
+    # Any up vector not along the look axis; the map's orientation does not matter.
+    up = np.array([0.0, 0.0, 1.0]) if axis != 2 else np.array([0.0, 1.0, 0.0])
+    z_axis = -look                 # lights look down their local -Z
+    x_axis = np.cross(up, z_axis)
+    y_axis = np.cross(z_axis, x_axis)
+    world_from_light = np.eye(4)
+    world_from_light[:3, 0], world_from_light[:3, 1], world_from_light[:3, 2] = \
+        x_axis, y_axis, z_axis
+    world_from_light[:3, 3] = np.asarray(position, dtype=np.float64)
+    return spot_light_matrices(world_from_light, angle_rad, clip_start, clip_end)
+
+
+def aabbs_in_point_light_face(lo, hi, position, face, reach):
+    """Which (N, 3) boxes ``lo``..``hi`` may hold casters for cube face ``face`` of a point
+    light at ``position`` whose light ends at ``reach``: the box meets the sphere of that
+    radius and the face's pyramid (conservative: each of the pyramid's four planes through
+    the light has some corner of the box on its inner side)."""
+    lo = np.asarray(lo, dtype=np.float64) - position
+    hi = np.asarray(hi, dtype=np.float64) - position
+    nearest = np.clip(0.0, lo, hi)
+    inside = np.einsum("ij,ij->i", nearest, nearest) <= reach * reach
+    axis, sign = POINT_LIGHT_FACES[face]
+    # Along the look axis, the box's farthest reach in the face's direction.
+    along = hi[:, axis] if sign > 0 else -lo[:, axis]
+    inside &= along > 0.0
+    for other in (a for a in range(3) if a != axis):
+        # sign * d[axis] >= +-d[other] somewhere in the box.
+        inside &= along - lo[:, other] >= 0.0
+        inside &= along + hi[:, other] >= 0.0
+    return inside
+
+
 def spot_texel_size(spot_angle_rad, resolution, distance):
     """Scene units covered by one spot shadow-map texel at ``distance`` along the aim."""
     return 2.0 * math.tan(0.5 * spot_angle_rad) * distance / resolution

@@ -28,6 +28,9 @@ class PointLight:
     color: np.ndarray           # see falloff: W/sr (PHYSICAL) or W/m^2 at the light
     radius: float               # where the light ends (scene units)
     falloff: str = "PHYSICAL"   # frame_layout.LIGHT_FALLOFFS
+    casts_shadow: bool = False  # Blender's Shadow checkbox (course lights: off)
+    clip_start: float = 0.05    # shadow maps begin this far from the light (scene units)
+    source_radius: float = 0.0  # Blender's Radius (scene units): soft shadows' penumbra
 
 
 @dataclass

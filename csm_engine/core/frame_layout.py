@@ -19,7 +19,9 @@ import numpy as np
 MAX_CASCADES = 4
 MAX_POINT_LIGHTS = 64
 MAX_SPOT_LIGHTS = 8
-MAX_SHADOW_TILES = MAX_CASCADES + MAX_SPOT_LIGHTS   # one tile per cascade and shadowed spot
+MAX_POINT_SHADOWS = 4     # point lights with cube-map shadows (six tiles each)
+# One tile per cascade and shadowed spot, six per shadowed point light.
+MAX_SHADOW_TILES = MAX_CASCADES + MAX_SPOT_LIGHTS + 6 * MAX_POINT_SHADOWS
 
 # Identifiers as the Blender settings spell them (EnumProperty items); the GLSL value of
 # each is its position here, so only ever append.
@@ -50,7 +52,8 @@ def glsl_defines():
     """Every ``(name, value)`` ``#define`` the programs get, values as GLSL text: the
     array limits and one constant per enum member (``DEBUG_CASCADES``, ``PCF_GRID``, ...)."""
     defines = [("MAX_CASCADES", MAX_CASCADES), ("MAX_POINT_LIGHTS", MAX_POINT_LIGHTS),
-               ("MAX_SPOT_LIGHTS", MAX_SPOT_LIGHTS), ("MAX_SHADOW_TILES", MAX_SHADOW_TILES)]
+               ("MAX_SPOT_LIGHTS", MAX_SPOT_LIGHTS), ("MAX_SHADOW_TILES", MAX_SHADOW_TILES),
+               ("MAX_POINT_SHADOWS", MAX_POINT_SHADOWS)]
     for prefix, members in GLSL_ENUMS:
         defines += [(f"{prefix}_{member}", index) for index, member in enumerate(members)]
     return [(name, str(value)) for name, value in defines]
@@ -353,6 +356,7 @@ POINT_LIGHT_LAYOUT = UniformLayout("PointLightData", (
     ("color", "vec3", "PHYSICAL: radiant intensity (W/sr); LINEAR_RADIUS: irradiance at "
                       "the light (W/m^2)"),
     ("falloff", "int", "FALLOFF_* with distance"),
+    ("source_radius", "float", "Blender's Radius (scene units): soft shadows' penumbra"),
 ))
 
 SPOT_LIGHT_LAYOUT = UniformLayout("SpotLightData", (
@@ -402,6 +406,10 @@ FRAME_LAYOUT = UniformLayout("FrameData", (
     ("sample_index", "int", "which jittered sample of a final render this is (0 in the "
                             "viewport): moves per-pixel noise so samples average it away"),
     ("point_light_count", "int", "point_lights in use, 0..MAX_POINT_LIGHTS"),
+    ("point_shadow_count", "int", "the first this many point_lights cast shadows, "
+                                  "0..MAX_POINT_SHADOWS"),
+    ("point_shadow_tiles", "int", "shadow_tiles index of the first one's +x face; point "
+                                  "light i's face f is point_shadow_tiles + 6 i + f"),
     ("spot_light_count", "int", "spot_lights in use, 0..MAX_SPOT_LIGHTS"),
     ("debug_view", "int", "DEBUG_* view to draw, DEBUG_NONE for the lit image"),
     ("debug_shadow_map", "int", "shadow tile the shadow-map view shows (cascades first)"),

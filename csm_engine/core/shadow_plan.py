@@ -15,7 +15,8 @@ import numpy as np
 from . import cascades
 from .frame import spot_cone_cosines
 from .frame_layout import (DEBUG_VIEW_INDEX, FRAME_LAYOUT, LIGHT_FALLOFF_INDEX, MAX_CASCADES,
-                           MAX_POINT_LIGHTS, MAX_SHADOW_TILES, MAX_SPOT_LIGHTS,
+                           MAX_POINT_LIGHTS, MAX_POINT_SHADOWS, MAX_SHADOW_TILES,
+                           MAX_SPOT_LIGHTS,
                            PCF_PATTERN_INDEX)
 from .matrices import inverse_projection, inverse_rigid, inverse_transpose_3x3
 
@@ -25,6 +26,10 @@ CASCADE_LINE_COLORS = ((1, .2, .2, 1), (.2, 1, .2, 1), (.3, .4, 1, 1), (1, 1, .2
 WINDOW_FROM_CLIP = np.array([[.5, 0, 0, .5], [0, .5, 0, .5], [0, 0, .5, .5], [0, 0, 0, 1.]])
 MAX_ATLAS_WIDTH = 8192
 SPOT_SHADOW_RESOLUTION = 1024
+POINT_SHADOW_RESOLUTION = 512      # texels per cube face
+# Texels each cube face reaches past 90 degrees, so the widest PCF kernel (radius 3 and the
+# bilinear taps' extra texel) near a face's edge reads rendered texels.
+POINT_FACE_MARGIN_TEXELS = 4
 
 # Cascades kept while "Freeze Cascades" is on, per scene. Plain numpy data, no GPU objects.
 _FROZEN = {}
@@ -44,6 +49,9 @@ class ShadowTile:
     # Scene units per texel along the tile's x and y. Fit to Visible Depth makes a cascade's
     # box rectangular, so its texels are too; texel_world is the larger. None: square.
     texel_world_xy: tuple = None
+    # A point light's cube face: (light position, face index into
+    # cascades.POINT_LIGHT_FACES, reach), for caster culling. None for other tiles.
+    point_face: tuple = None
 
     def texel_world_per_axis(self):
         """(x, y) scene units per texel (perspective: per unit of distance)."""
@@ -62,6 +70,8 @@ class ShadowPlan:
     spot_tiles: dict           # spot index -> tile index
     frozen_camera: object = None
     warnings: list = None      # settings that could not be honoured, in the user's words
+    point_shadow_count: int = 0    # the first this many snap.points have six tiles each,
+    point_shadow_tiles: int = 0    # from this tile index on (+x, -x, +y, -y, +z, -z)
 
 
 def instance_bounds(instances, meshes):
@@ -213,6 +223,9 @@ def plan_shadows(snap, bounds, depth_blocks=None):
         spot_tiles[index] = len(tiles)
         tiles.append(ShadowTile(clip_from_light @ light_from_world, resolution,
                                 2.0 * np.tan(half) / resolution, near, far, True))
+    point_shadow_tiles = len(tiles)
+    point_shadow_count = _plan_point_shadows(snap.points[:MAX_POINT_LIGHTS],
+                                             int(s.resolution), tiles, warnings)
     if bounds is not None:
         # The shadow-map view stretches depth over the part the scene occupies; the occluder
         # margin alone would squeeze all content into the last few percent of grey.
@@ -230,7 +243,33 @@ def plan_shadows(snap, bounds, depth_blocks=None):
                 tile.display_near = tile.near + window * (tile.far - tile.near)
     return ShadowPlan(tiles, count, np.asarray(splits, dtype=np.float64),
                       np.asarray(bands, dtype=np.float64), distance, spot_tiles, frozen_camera,
-                      warnings)
+                      warnings, point_shadow_count, point_shadow_tiles)
+
+
+def _plan_point_shadows(points, resolution, tiles, warnings):
+    """Six cube-face tiles for each point light that casts shadows (they come first in
+    ``points``, see snapshot.take), up to MAX_POINT_SHADOWS; appended to ``tiles``.
+    Returns how many lights got them."""
+    casting = 0
+    while casting < len(points) and points[casting].casts_shadow:
+        casting += 1
+    if casting > MAX_POINT_SHADOWS:
+        warnings.append(f"{casting} point lights cast shadows: CSM draws the shadows of "
+                        f"{MAX_POINT_SHADOWS} (the others light without shadows)")
+    resolution = min(POINT_SHADOW_RESOLUTION, resolution)
+    angle = cascades.point_light_face_angle(resolution, POINT_FACE_MARGIN_TEXELS)
+    texel = 2.0 * math.tan(0.5 * angle) / resolution
+    count = min(casting, MAX_POINT_SHADOWS, (MAX_SHADOW_TILES - len(tiles)) // 6)
+    for light in points[:count]:
+        near = max(light.clip_start, 1e-3)
+        far = max(light.radius, near * 2.0)
+        position = np.asarray(light.position, dtype=np.float64)
+        for face in range(len(cascades.POINT_LIGHT_FACES)):
+            light_from_world, clip_from_light = cascades.point_light_face_matrices(
+                position, face, angle, near, far)
+            tiles.append(ShadowTile(clip_from_light @ light_from_world, resolution, texel,
+                                    near, far, True, point_face=(position, face, far)))
+    return count
 
 
 def gbuffer_plan(snap, bounds):
@@ -405,6 +444,8 @@ def _plan_fields(snap, plan):
                               falloff=LIGHT_FALLOFF_INDEX[spot.falloff],
                               source_radius=spot.source_radius))
     return dict(
+        point_shadow_count=plan.point_shadow_count,
+        point_shadow_tiles=plan.point_shadow_tiles,
         sun_casts_shadow=int(snap.sun is not None and count > 0),
         cascade_count=count,
         shadow_distance=plan.shadow_distance,
@@ -424,7 +465,8 @@ def _snapshot_fields(snap):
     spots = snap.spots[:MAX_SPOT_LIGHTS]
     sun = snap.sun
     point_rows = [dict(position=light.position, radius=light.radius, color=light.color,
-                       falloff=LIGHT_FALLOFF_INDEX[light.falloff])
+                       falloff=LIGHT_FALLOFF_INDEX[light.falloff],
+                       source_radius=light.source_radius)
                   for light in points]
     clip_from_world, view_from_world, world_from_clip = _camera_matrices(camera)
     return dict(

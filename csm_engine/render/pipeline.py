@@ -172,8 +172,10 @@ def lighting_program(snap):
     settings = snap.settings
     debug = getattr(settings, "debug_view", "NONE") != "NONE" or \
         bool(getattr(settings, "debug_inset", False))
+    point_shadows = bool(snap.points) and snap.points[0].casts_shadow
     return (LIGHTING_PROGRAMS.get(getattr(settings, "shadow_filter", "PCF"), "lighting") +
-            ("_points" if snap.points else "") + ("_spots" if snap.spots else "") +
+            ("_points" if snap.points else "") +
+            ("_point_shadows" if point_shadows else "") + ("_spots" if snap.spots else "") +
             ("_debug" if debug else ""))
 
 
@@ -777,6 +779,10 @@ class Pipeline:
     def _cull(self, instances, bounds_lo_hi, tile):
         if bounds_lo_hi is None:
             return range(0)
+        if tile.point_face is not None:
+            position, face, reach = tile.point_face
+            return np.nonzero(cascades.aabbs_in_point_light_face(
+                bounds_lo_hi[0], bounds_lo_hi[1], position, face, reach))[0]
         if tile.cascade is None:    # spot tiles: no caster culling (few, small frusta)
             return range(len(instances))
         held = self._held_instances

@@ -159,8 +159,12 @@ for _filter in ("HARD", "SOFT"):
         PROGRAMS["lighting"], defines=(("SHADOW_FILTER", f"FILTER_{_filter}"),))
 # And each of those a "_debug" twin with the debug views (WITH_DEBUG_VIEWS), for the same
 # reason: the lit image does not pay for the views' code.
-for _feature, _define in (("_points", "POINT_LIGHTS"), ("_spots", "SPOT_LIGHTS")):
-    for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
+# The point-light programs have a "_point_shadows" twin too, with the shadowed point
+# lights' loop (POINT_SHADOWS).
+for _feature, _define, _needs in (("_points", "POINT_LIGHTS", ""),
+                                  ("_point_shadows", "POINT_SHADOWS", "_points"),
+                                  ("_spots", "SPOT_LIGHTS", "")):
+    for _name in [name for name in PROGRAMS if name.startswith("lighting") and _needs in name]:
         PROGRAMS[_name + _feature] = dict(
             PROGRAMS[_name], defines=PROGRAMS[_name].get("defines", ()) + ((_define, "1"),))
 for _name in [name for name in PROGRAMS if name.startswith("lighting")]:

@@ -177,9 +177,37 @@ void main()
   }
 
 #ifdef POINT_LIGHTS
-  /* Only the programs for scenes with point lights have this loop (see SPOT_LIGHTS). */
+  /* Only the programs for scenes with point lights have these loops (see SPOT_LIGHTS). */
   int point_count = frame.point_light_count;
-  for (int i = 0; i < MAX_POINT_LIGHTS; i++) {
+  int first_unshadowed = 0;
+#  ifdef POINT_SHADOWS
+  /* The point lights with cube-map shadows come first; only the programs for scenes with
+   * such lights have this loop, so the others pay nothing for it. */
+  first_unshadowed = frame.point_shadow_count;
+  for (int i = 0; i < MAX_POINT_SHADOWS; i++) {
+    if (i >= first_unshadowed) {
+      break;
+    }
+    PointLightData light = frame.point_lights[i];
+    vec3 to_light = light.position - p;
+    float d = length(to_light);
+    float attenuation = distance_falloff(light.falloff, d, light.radius);
+    if (attenuation > 0.0) {
+      vec3 l = to_light / max(d, 1e-6);
+      /* The cube face the point lies in: the largest axis of light -> point. */
+      vec3 away = -to_light;
+      vec3 size = abs(away);
+      int face = size.x >= size.y && size.x >= size.z ? (away.x >= 0.0 ? 0 : 1) :
+                 (size.y >= size.z ? (away.y >= 0.0 ? 2 : 3) : (away.z >= 0.0 ? 4 : 5));
+      float vis = shadow_tile_visibility(
+          frame.shadow_tiles[frame.point_shadow_tiles + 6 * i + face], p, shadow_normal,
+          dot(shadow_normal, l), light.source_radius);
+      color += light.color * attenuation * vis *
+               surface_brdf(albedo, metallic, specular, shininess, n, l, to_camera);
+    }
+  }
+#  endif
+  for (int i = first_unshadowed; i < MAX_POINT_LIGHTS; i++) {
     if (i >= point_count) {
       break;
     }

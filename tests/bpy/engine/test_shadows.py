@@ -353,3 +353,89 @@ def test_impossible_manual_splits_warn_and_fall_back(pillar_field):
     warnings = " ".join(result.warnings)
     assert "manual split" in warnings and "hybrid" in warnings, warnings
     assert (images["aux"][..., 0] < 0.5).mean() > 0.005, "shadows still render"
+
+
+@pytest.fixture
+def boxes_round_a_point_light(empty_scene):
+    """Four boxes around a point light 2.5 units above the ground, one in each horizontal
+    cube face (the ground near the light is in the -Z face), seen from above; no world
+    light."""
+    scene = empty_scene
+    add_ground(40)
+    for x, y in ((3.0, 0.0), (-3.0, 0.0), (0.0, 3.0), (0.0, -3.0)):
+        add_box((x, y, 1.0), (0.5, 0.5, 1.0))
+    bpy.ops.object.light_add(type='POINT', location=(0.0, 0.0, 2.5))
+    light = bpy.context.object
+    light.data.energy = 2000.0
+    light.data.shadow_soft_size = 0.0
+    add_camera(scene, (0.0, -0.5, 28.0), (0.0, 0.0, 0.0), lens=30.0)
+    from tests.bpy.engine.test_render import set_world_color
+    set_world_color(scene, (0.0, 0.0, 0.0))
+    return scene, light
+
+
+def point_light_ground(scene, light, width=320, height=320):
+    """Brightness of the ground pixels lit by ``light`` from their side, and whether a
+    ray cast from each to the light hits anything first."""
+    images = render_scene(scene, width, height)
+    position = images["position"]
+    brightness = images["combined"][..., :3].sum(axis=2)
+    ground = (position[..., 3] > 0.5) & (np.abs(position[..., 2]) < 1e-3)
+    rows, cols = np.nonzero(ground)
+    points = position[rows, cols, :3]
+    to_light = np.array(light.location) - points
+    distance = np.linalg.norm(to_light, axis=1)
+    bvh = world_bvh(scene)
+    blocked = np.zeros(len(points), dtype=bool)
+    for i, (p, d, dist) in enumerate(zip(points, to_light / distance[:, None], distance)):
+        hit = bvh.ray_cast(Vector(p) + Vector((0, 0, 1e-3)), Vector(d))
+        blocked[i] = hit[2] is not None and hit[3] < dist - 1e-2
+    return brightness[rows, cols], blocked
+
+
+def test_point_light_casts_shadows_in_every_direction(boxes_round_a_point_light):
+    """A point light with Shadow on (Blender's default) casts shadows through its six cube
+    faces, where a ray cast says, as in EEVEE and Cycles."""
+    scene, light = boxes_round_a_point_light
+    brightness, blocked = point_light_ground(scene, light)
+    lit, dark = brightness[~blocked], brightness[blocked]
+    assert len(dark) > 2000 and len(lit) > 2000
+    assert dark.mean() < 0.05 * lit.mean(), (dark.mean(), lit.mean())
+    # Pixels on the wrong side of an edge: the ray cast's verdict at the pixel centre.
+    wrong = np.count_nonzero(blocked & (brightness > 0.5 * np.median(lit))) + \
+        np.count_nonzero(~blocked & (brightness < 0.02 * np.median(lit)))
+    assert wrong < 0.01 * len(brightness), wrong
+
+
+def test_point_light_shadow_off_and_course_lights_cast_none(boxes_round_a_point_light):
+    scene, light = boxes_round_a_point_light
+    light.data.use_shadow = False
+    brightness, blocked = point_light_ground(scene, light)
+    lit = brightness[~blocked]
+    assert brightness[blocked].mean() > 0.5 * np.median(lit), "no shadow with Shadow off"
+    # The course's point lights cast no shadows (scene-format.md): imported with Shadow off.
+    import os
+    from csm_engine.blender import cli
+    from csm_engine.core import paths
+    course = cli.open_scene(os.path.join(paths.data_dir(), "scenes", "point_lights.json"))
+    lights = [o.data for o in course.objects if o.type == 'LIGHT' and o.data.type == 'POINT']
+    assert lights and not any(data.use_shadow for data in lights)
+
+
+def test_a_point_lights_radius_softens_its_shadow_with_the_soft_filter(
+        boxes_round_a_point_light):
+    scene, light = boxes_round_a_point_light
+
+    def penumbra_pixels(shadow_filter, radius):
+        scene.csm.shadow_filter = shadow_filter
+        light.data.shadow_soft_size = radius
+        light.data.use_shadow = False
+        off = render_scene(scene, 200, 200)["combined"][..., :3].sum(axis=2)
+        light.data.use_shadow = True
+        on = render_scene(scene, 200, 200)["combined"][..., :3].sum(axis=2)
+        visibility = on / np.maximum(off, 1e-6)
+        return np.count_nonzero((visibility > 0.05) & (visibility < 0.95) & (off > 1e-3))
+
+    hard, soft = penumbra_pixels('SOFT', 0.0), penumbra_pixels('SOFT', 0.5)
+    assert soft > 3 * hard, (hard, soft)
+    assert penumbra_pixels('PCF', 0.5) < 2 * hard      # PCF ignores the light's Radius
