@@ -39,6 +39,28 @@ vec3 world_position_at(vec2 uv, float view_depth)
   return mix(near_point, far_point, (view_depth - near_depth) / (far_depth - near_depth));
 }
 
+#ifdef POINT_LIGHTS
+/* A point light's attenuation at p (0 beyond its reach), and the unit direction to it. */
+float point_light_at(PointLightData light, vec3 p, out vec3 l)
+{
+  vec3 to_light = light.position - p;
+  float d = length(to_light);
+  l = to_light / max(d, 1e-6);
+  return distance_falloff(light.falloff, d, light.radius);
+}
+
+/* The cube face (+x, -x, +y, -y, +z, -z: cascades.POINT_LIGHT_FACES) a direction from a
+ * point light lies in: its largest axis. */
+int cube_face(vec3 away)
+{
+  vec3 size = abs(away);
+  if (size.x >= size.y && size.x >= size.z) {
+    return away.x >= 0.0 ? 0 : 1;
+  }
+  return size.y >= size.z ? (away.y >= 0.0 ? 2 : 3) : (away.z >= 0.0 ? 4 : 5);
+}
+#endif
+
 /* The AO at full-resolution pixel px, from the four half-resolution values around it (each
  * computed at full-resolution pixel 2h, and holding that pixel's view depth): bilinear
  * weights, times how well each one's depth fits this surface (its depth here plus the
@@ -189,19 +211,12 @@ void main()
       break;
     }
     PointLightData light = frame.point_lights[i];
-    vec3 to_light = light.position - p;
-    float d = length(to_light);
-    float attenuation = distance_falloff(light.falloff, d, light.radius);
+    vec3 l;
+    float attenuation = point_light_at(light, p, l);
     if (attenuation > 0.0) {
-      vec3 l = to_light / max(d, 1e-6);
-      /* The cube face the point lies in: the largest axis of light -> point. */
-      vec3 away = -to_light;
-      vec3 size = abs(away);
-      int face = size.x >= size.y && size.x >= size.z ? (away.x >= 0.0 ? 0 : 1) :
-                 (size.y >= size.z ? (away.y >= 0.0 ? 2 : 3) : (away.z >= 0.0 ? 4 : 5));
-      float vis = shadow_tile_visibility(
-          frame.shadow_tiles[frame.point_shadow_tiles + 6 * i + face], p, shadow_normal,
-          dot(shadow_normal, l), light.source_radius);
+      int tile = frame.point_shadow_tiles + 6 * i + cube_face(p - light.position);
+      float vis = shadow_tile_visibility(frame.shadow_tiles[tile], p, shadow_normal,
+                                         dot(shadow_normal, l), light.source_radius);
       color += light.color * attenuation * vis *
                surface_brdf(albedo, metallic, specular, shininess, n, l, to_camera);
     }
@@ -212,12 +227,11 @@ void main()
       break;
     }
     PointLightData light = frame.point_lights[i];
-    vec3 to_light = light.position - p;
-    float d = length(to_light);
-    float attenuation = distance_falloff(light.falloff, d, light.radius);
+    vec3 l;
+    float attenuation = point_light_at(light, p, l);
     if (attenuation > 0.0) {
-      color += light.color * attenuation * surface_brdf(albedo, metallic, specular, shininess,
-                                                        n, to_light / max(d, 1e-6), to_camera);
+      color += light.color * attenuation *
+               surface_brdf(albedo, metallic, specular, shininess, n, l, to_camera);
     }
   }
 #endif
