@@ -100,14 +100,23 @@ def depth_blocks_from_reduction(pairs, block_pixels, width, height):
     (ndc_low, ndc_high, nearest, farthest) of the blocks that show anything.
     ``pairs``: (rows, cols, 2) nearest / farthest view depth per block (rows bottom-up;
     nearest > 1e37 where a block shows only background)."""
-    pairs = np.asarray(pairs, dtype=np.float64)
-    shown = pairs[..., 0] < 1e37
-    ndc_low, ndc_high = _block_corners(shown.shape, block_pixels, width, height)
-    return ndc_low[shown], ndc_high[shown], pairs[..., 0][shown], pairs[..., 1][shown]
+    pairs = np.asarray(pairs)
+    nearest = pairs[..., 0].astype(np.float64).ravel()
+    farthest = pairs[..., 1].astype(np.float64).ravel()
+    ndc_low, ndc_high = _block_corners(pairs.shape[:2], block_pixels, width, height)
+    shown = nearest < 1e37
+    # NOTE: a view that the scene fills shows something in every block: the corners are
+    # then the held arrays themselves. Otherwise indices and ``take``: boolean indexing
+    # of the (rows, cols, 2) arrays cost ~0.15 ms a redraw.
+    if shown.all():
+        return ndc_low, ndc_high, nearest, farthest
+    shown = np.flatnonzero(shown)
+    return (ndc_low.take(shown, axis=0), ndc_high.take(shown, axis=0), nearest.take(shown),
+            farthest.take(shown))
 
 
-# (rows, cols, block pixels, width, height) -> every block's NDC corners (rows, cols, 2):
-# the same for every frame of one viewport size.
+# (rows, cols, block pixels, width, height) -> every block's NDC corners, (rows * cols, 2)
+# row by row: the same for every frame of one viewport size.
 _BLOCK_CORNERS = {}
 
 
@@ -120,7 +129,8 @@ def _block_corners(shape, block_pixels, width, height):
         x1 = np.minimum((cols + 1) * block_pixels, width) / width * 2.0 - 1.0
         y0 = rows * block_pixels / height * 2.0 - 1.0
         y1 = np.minimum((rows + 1) * block_pixels, height) / height * 2.0 - 1.0
-        held = (np.stack([x0, y0], axis=-1), np.stack([x1, y1], axis=-1))
+        held = (np.stack([x0, y0], axis=-1).reshape(-1, 2),
+                np.stack([x1, y1], axis=-1).reshape(-1, 2))
         for array in held:
             array.setflags(write=False)
         if len(_BLOCK_CORNERS) >= 8:
