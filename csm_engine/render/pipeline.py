@@ -153,12 +153,13 @@ class _DrawMaterial:
 
 
 # The G-buffer's draws in order: (program, slot of the _draw_items entry, whether the mesh
-# has tangents, None: either). NOTE: llvmpipe samples a texture even where the shader's
-# `if` skips it, so materials without images use a program that has no texture reads
-# (about a third of the G-buffer's time here).
-_GBUFFER_PASSES = (("gbuffer_untextured", 5, None), ("gbuffer", 0, False),
-                   ("gbuffer_tangent", 0, True), ("gbuffer_masked", 1, False),
-                   ("gbuffer_masked_tangent", 1, True))
+# has tangents, None: either, whether the program samples the material's textures).
+# NOTE: llvmpipe samples a texture even where the shader's `if` skips it, so materials
+# without images use a program that has no texture reads (about a third of the G-buffer's
+# time here); it is given no textures either (four binds per material a frame).
+_GBUFFER_PASSES = (("gbuffer_untextured", 5, None, False), ("gbuffer", 0, False, True),
+                   ("gbuffer_tangent", 0, True, True), ("gbuffer_masked", 1, False, True),
+                   ("gbuffer_masked_tangent", 1, True, True))
 
 # The lighting program of each Shadow Filter setting (shaders.py builds one per filter).
 LIGHTING_PROGRAMS = {"HARD": "lighting_hard", "PCF": "lighting", "SOFT": "lighting_soft"}
@@ -208,7 +209,7 @@ class _DrawLists:
         self.gbuffer_masks = tuple(
             np.array([bool(entry[slot]) and (tangents is None or entry[4] == tangents)
                       for entry in items], dtype=bool)
-            for _program, slot, tangents in _GBUFFER_PASSES)
+            for _program, slot, tangents, _textured in _GBUFFER_PASSES)
         self.shadow_masks = tuple(np.array([bool(entry[2 + masked]) for entry in items],
                                            dtype=bool) for masked in (0, 1))
         self.signatures = None      # Pipeline._caster_signatures, asked for once
@@ -498,8 +499,8 @@ class Pipeline:
                 # Opaque before alpha-tested; untextured materials with the program that
                 # samples no texture, meshes with tangents (normal maps) with the programs
                 # that read them. (slot in the _draw_items entry, tangents or None: any)
-                for (program, slot, _tangents), drawn in zip(_GBUFFER_PASSES,
-                                                             lists.gbuffer_masks):
+                for (program, slot, _tangents, textured), drawn in zip(_GBUFFER_PASSES,
+                                                                       lists.gbuffer_masks):
                     rows = order[drawn[order]]
                     if not len(rows):
                         continue
@@ -518,8 +519,10 @@ class Pipeline:
                                 culling = wanted
                             if material is not bound:
                                 gbuffer.uniform_block("material", material.block)
-                                for name, texture in zip(_MATERIAL_SAMPLERS, material.textures):
-                                    gbuffer.uniform_sampler(name, texture)
+                                if textured:
+                                    for name, texture in zip(_MATERIAL_SAMPLERS,
+                                                             material.textures):
+                                        gbuffer.uniform_sampler(name, texture)
                                 bound = material
                             self._gpu_call(batch.draw, gbuffer)
                 gpu.state.face_culling_set('NONE')

@@ -124,8 +124,9 @@ for _name in ("gbuffer", "shadow"):
     PROGRAMS[_name + "_masked"] = dict(PROGRAMS[_name], defines=(("ALPHA_MASK", "1"),),
                                        material=True)
 # Materials without images: no texture reads at all (llvmpipe pays for a sample behind an
-# `if` that skips it).
-PROGRAMS["gbuffer_untextured"] = dict(PROGRAMS["gbuffer"], defines=(("UNTEXTURED", "1"),))
+# `if` that skips it), so no samplers to bind either.
+PROGRAMS["gbuffer_untextured"] = dict(PROGRAMS["gbuffer"], defines=(("UNTEXTURED", "1"),),
+                                      samplers=())
 # Meshes whose materials use a normal map carry a per-corner tangent (xyz, bitangent sign);
 # only they pay for it, with these variants (NORMAL_MAP) of the G-buffer programs.
 for _name in ("gbuffer", "gbuffer_masked"):
