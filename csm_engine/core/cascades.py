@@ -834,6 +834,30 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
 _RECEIVER_TERMS = [None, None, None]
 
 
+# The last blocks' view-window ends (``_block_window``): (ndc_low, ndc_high, projection,
+# (x_lo, x_hi, y_lo, y_hi)).
+_BLOCK_WINDOW = [None, None, None, None]
+
+
+def _block_window(projection, ndc_low, ndc_high):
+    """Each block's x and y ends on the view window (at depth 1 for perspective):
+    (x_lo, x_hi, y_lo, y_hi). Kept while the corner arrays are the same objects and the
+    projection is the same: a view the scene fills has the same held corner arrays every
+    redraw (``shadow_plan.depth_blocks_from_reduction``), read-only."""
+    held = _BLOCK_WINDOW
+    if held[0] is ndc_low and held[1] is ndc_high and held[2] == projection:
+        return held[3]
+    left, right, bottom, top = projection.view_window()
+    window = (left + (ndc_low[:, 0] + 1.0) * 0.5 * (right - left),
+              left + (ndc_high[:, 0] + 1.0) * 0.5 * (right - left),
+              bottom + (ndc_low[:, 1] + 1.0) * 0.5 * (top - bottom),
+              bottom + (ndc_high[:, 1] + 1.0) * 0.5 * (top - bottom))
+    # Only arrays that cannot change in place are worth holding on to.
+    if not (ndc_low.flags.writeable or ndc_high.flags.writeable):
+        held[:] = [ndc_low, ndc_high, projection, window]
+    return window
+
+
 def _receiver_terms(world_from_view, projection, blocks, light_from_world_rot):
     """Per screen block and light-frame axis: the least and greatest of a x + b y (- c)
     over the block's x and y ends, where (a, b, c) is that axis's row of the linear map from
@@ -850,21 +874,18 @@ def _receiver_terms(world_from_view, projection, blocks, light_from_world_rot):
     if _RECEIVER_TERMS[0] is blocks and _RECEIVER_TERMS[1] == key:
         return _RECEIVER_TERMS[2]
     rotation_xy = _check_rotation(light_from_world_rot)[:2]
-    ndc_low, ndc_high = blocks[0], blocks[1]
-    left, right, bottom, top = projection.view_window()
-    x_lo = left + (ndc_low[:, 0] + 1.0) * 0.5 * (right - left)
-    x_hi = left + (ndc_high[:, 0] + 1.0) * 0.5 * (right - left)
-    y_lo = bottom + (ndc_low[:, 1] + 1.0) * 0.5 * (top - bottom)
-    y_hi = bottom + (ndc_high[:, 1] + 1.0) * 0.5 * (top - bottom)
+    x_lo, x_hi, y_lo, y_hi = _block_window(projection, blocks[0], blocks[1])
     linear = rotation_xy @ world_from_view[:3, :3]            # (2, 3)
     offset = rotation_xy @ world_from_view[:3, 3]
     is_perspective = bool(projection.is_perspective)
     rows = []
     for a, b, c in linear:
-        ax = (a * x_lo, a * x_hi)
-        by = (b * y_lo, b * y_hi)
-        g_lo = np.minimum(*ax) + np.minimum(*by)
-        g_hi = np.maximum(*ax) + np.maximum(*by)
+        # x_lo <= x_hi, so a x is least at x_lo when a >= 0, else at x_hi (the same
+        # products a minimum of both would pick, at half the work); likewise b y.
+        ax_lo, ax_hi = (a * x_lo, a * x_hi) if a >= 0.0 else (a * x_hi, a * x_lo)
+        by_lo, by_hi = (b * y_lo, b * y_hi) if b >= 0.0 else (b * y_hi, b * y_lo)
+        g_lo = ax_lo + by_lo
+        g_hi = ax_hi + by_hi
         if is_perspective:
             g_lo, g_hi = g_lo - c, g_hi - c
         rows += [g_lo, g_hi]
