@@ -919,36 +919,38 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
     terms, c, offset, is_perspective = _receiver_terms(world_from_view, projection, blocks,
                                                        light_from_world_rot)
     positive = is_perspective and d0.min() > 0.0     # d1 >= d0 for a block inside
-    low, high = np.empty(2), np.empty(2)
+    # NOTE: the few numbers per axis below are Python floats (the same IEEE arithmetic as
+    # numpy's, without its per-call cost on 2-element arrays).
+    low, high = [], []
     for axis in range(2):
         g_lo, g_hi = terms[2 * axis].take(inside), terms[2 * axis + 1].take(inside)
         if positive:
             # d g is least at d0 or d1 times g's least, greatest at d0 or d1 times its
             # greatest, as d > 0.
-            low[axis] = min((d0 * g_lo).min(), (d1 * g_lo).min())
-            high[axis] = max((d0 * g_hi).max(), (d1 * g_hi).max())
+            least = min((d0 * g_lo).min(), (d1 * g_lo).min())
+            greatest = max((d0 * g_hi).max(), (d1 * g_hi).max())
         elif is_perspective:
             # Bilinear in (d, g): the extremes are at d0 or d1 times g's least or greatest.
             products = (d0 * g_lo, d1 * g_lo, d0 * g_hi, d1 * g_hi)
-            low[axis] = min(float(p.min()) for p in products)
-            high[axis] = max(float(p.max()) for p in products)
+            least = min(float(p.min()) for p in products)
+            greatest = max(float(p.max()) for p in products)
         else:
             depth = (-c[axis] * d0, -c[axis] * d1)
-            low[axis] = (g_lo + np.minimum(*depth)).min()
-            high[axis] = (g_hi + np.maximum(*depth)).max()
-    low += offset
-    high += offset
-    centre = 0.5 * (low + high)
-    needed = np.maximum(0.5 * (high - low), 1e-9)
-    half = np.array([_round_up_dyadic(float(n), bits=4) for n in needed])
+            least = (g_lo + np.minimum(*depth)).min()
+            greatest = (g_hi + np.maximum(*depth)).max()
+        low.append(float(least) + float(offset[axis]))
+        high.append(float(greatest) + float(offset[axis]))
+    centre = [0.5 * (lo + hi) for lo, hi in zip(low, high)]
+    half = [_round_up_dyadic(max(0.5 * (hi - lo), 1e-9), bits=4) for lo, hi in zip(low, high)]
     if previous is not None:
         old_centre, old_half = (np.asarray(v, dtype=np.float64) for v in previous)
         # The whole previous rectangle, while it holds every receiver and is not much too
         # big: the cascade then does not move at all (its shadow map can be kept).
-        if np.all(low >= old_centre - old_half) and np.all(high <= old_centre + old_half) \
-                and np.all(old_half < half / shrink_below):
+        if all(lo >= oc - oh and hi <= oc + oh and oh < h / shrink_below
+               for lo, hi, oc, oh, h in zip(low, high, old_centre.tolist(),
+                                            old_half.tolist(), half)):
             return old_centre, old_half
-    return centre, half
+    return np.array(centre), np.array(half)
 
 
 def visible_depth_range(nearest, farthest, previous=None, steps_per_octave=8,
