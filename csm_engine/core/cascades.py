@@ -977,7 +977,7 @@ def visible_depth_range(nearest, farthest, previous=None, steps_per_octave=8,
     return (low, high)
 
 
-def aabbs_in_cascade(aabb_min_world, aabb_max_world, cascade, checked=False):
+def aabbs_in_cascade(aabb_min_world, aabb_max_world, cascade, checked=False, rotated=None):
     """Which of N world AABBs may cast into the cascade: (N, 3), (N, 3) -> (N,) bool.
 
     Conservative: each box is taken to light space as the AABB of its 8 transformed corners
@@ -986,12 +986,24 @@ def aabbs_in_cascade(aabb_min_world, aabb_max_world, cascade, checked=False):
     plane. Anything between the light and the box stays: it can shadow the slice.
     ``checked``: the boxes are known to be finite float64 (N, 3) pairs with min <= max
     (``boxes_are_valid``), so they are not checked again for every cascade.
+    ``rotated``: ``boxes_in_light_frame`` of these boxes for a light with this cascade's
+    rotation (the cascades of one sun share it), so it is not computed again.
     """
     low = np.asarray(aabb_min_world, dtype=np.float64)
     high = np.asarray(aabb_max_world, dtype=np.float64)
     if not checked:
         _check_boxes(low, high)
-    return _boxes_in_cascade(low, high, cascade)
+    return _boxes_in_cascade(low, high, cascade, rotated)
+
+
+def boxes_in_light_frame(aabb_min_world, aabb_max_world, light_from_world):
+    """The part of culling (N, 3) world boxes that depends only on the light's rotation:
+    their centres turned into the light's axes (before its translation) and their half
+    extents along those axes, as ``aabbs_in_cascade`` computes them."""
+    low = np.asarray(aabb_min_world, dtype=np.float64)
+    high = np.asarray(aabb_max_world, dtype=np.float64)
+    rotation = light_from_world[:3, :3]
+    return 0.5 * (low + high) @ rotation.T, 0.5 * (high - low) @ np.abs(rotation).T
 
 
 def boxes_are_valid(aabb_min_world, aabb_max_world):
@@ -1016,10 +1028,12 @@ def _check_boxes(low, high):
                          f"max {high[index].tolist()}")
 
 
-def _boxes_in_cascade(low, high, cascade):
+def _boxes_in_cascade(low, high, cascade, rotated=None):
     matrix = cascade.light_from_world
-    centre = _transform_points(matrix, 0.5 * (low + high))
-    extent = 0.5 * (high - low) @ np.abs(matrix[:3, :3]).T
+    if rotated is None:
+        rotated = boxes_in_light_frame(low, high, matrix)
+    centre_turned, extent = rotated
+    centre = centre_turned + matrix[:3, 3]      # _transform_points, the rotation done
     near_low, near_high = centre - extent, centre + extent
     # NOTE: a relative tolerance keeps boxes that merely touch the shadow box (or sit a
     # rounding error away) in: wrongly culling a caster is visible, drawing one is not.

@@ -101,9 +101,11 @@ def _same_textures(cache, textures):
 class _InstanceArrays:
     """Per-instance arrays of one frame, kept while the instances are the same (viewport
     redraws that only move the view): world matrices (N, 4, 4), the same as GLSL lists,
-    which are mirrored, and the world AABBs (``instance_bounds``)."""
+    which are mirrored, the world AABBs (``instance_bounds``) and, for the last sun
+    rotation culled against, the boxes in its frame (``cascades.boxes_in_light_frame``)."""
     __slots__ = ("keys", "meshes", "matrix_bytes", "world_from_objects",
-                 "world_from_objects_gl", "mirrored", "bounds_lo_hi", "bounds_checked")
+                 "world_from_objects_gl", "mirrored", "bounds_lo_hi", "bounds_checked",
+                 "light_frame_boxes")
 
     def __init__(self, snap, cache, keys, meshes, world_from_objects):
         self.keys, self.meshes = keys, meshes
@@ -117,6 +119,7 @@ class _InstanceArrays:
         # Checked once here, not again for every cascade's culling (``_cull``).
         self.bounds_checked = self.bounds_lo_hi is not None and \
             cascades.boxes_are_valid(*self.bounds_lo_hi)
+        self.light_frame_boxes = (None, None)     # (rotation bytes, boxes in its frame)
 
     def holds(self, keys, meshes, world_from_objects):
         """Whether these arrays are those of ``keys`` drawn with ``meshes`` (GPUMesh or
@@ -790,8 +793,18 @@ class Pipeline:
             return range(len(instances))
         held = self._held_instances
         checked = held is not None and held.bounds_lo_hi is bounds_lo_hi and held.bounds_checked
+        rotated = None
+        if checked:
+            # The cascades of one sun share its rotation: the boxes are turned into its
+            # frame once, and again only when the sun turns or the instances change.
+            light_from_world = tile.cascade.light_from_world
+            rotation = light_from_world[:3, :3].tobytes()
+            if held.light_frame_boxes[0] != rotation:
+                held.light_frame_boxes = (rotation, cascades.boxes_in_light_frame(
+                    bounds_lo_hi[0], bounds_lo_hi[1], light_from_world))
+            rotated = held.light_frame_boxes[1]
         mask = cascades.aabbs_in_cascade(bounds_lo_hi[0], bounds_lo_hi[1], tile.cascade,
-                                         checked=checked)
+                                         checked=checked, rotated=rotated)
         return np.nonzero(mask)[0]
 
     def _kept_draw_items(self, snap, cache, white):

@@ -618,6 +618,21 @@ def test_vectorised_culling_matches_the_8_corner_test():
     assert csm.aabb_in_cascade(low[0], high[0], cascade) == mask[0]
 
 
+def test_culling_with_boxes_turned_for_another_cascade_of_the_same_sun():
+    """The boxes turned into one cascade's light frame (``boxes_in_light_frame``) cull the
+    same against every cascade with that rotation: what the pipeline keeps between them."""
+    rng = np.random.default_rng(RNG_SEED + 4001)
+    result = csm.compute_cascades(default_view(), DEFAULT_CAMERA, SUN_DIR, count=3)
+    low = result.cascades[0].box_corners_world().mean(axis=0) + \
+        rng.uniform(-150, 150, size=(500, 3))
+    high = low + rng.uniform(0, 8, size=(500, 3))
+    rotated = csm.boxes_in_light_frame(low, high, result.cascades[0].light_from_world)
+    for cascade in result.cascades:
+        np.testing.assert_array_equal(
+            csm.aabbs_in_cascade(low, high, cascade, checked=True, rotated=rotated),
+            csm.aabbs_in_cascade(low, high, cascade))
+
+
 def test_bad_culling_input_names_the_box():
     cascade = culling_cascade()
     low = np.zeros((3, 3))
