@@ -407,8 +407,11 @@ def _camera_matrices(camera):
 def pack_frame(snap, plan, like=None):
     """The frame uniform block for this frame (std140 float32 array, ``FRAME_LAYOUT``).
     ``like``: a block packed by this function for the same, unchanged ``snap`` with another
-    plan (a Fit to Visible Depth frame packs twice): it is copied and only what depends on
-    the plan is written again."""
+    plan or none (a Fit to Visible Depth frame packs twice): it is copied and only what
+    depends on the plan is written again. ``plan`` None: the snapshot's fields alone, the
+    plan's left 0 (a Fit to Visible Depth frame's G-buffer reads none of them)."""
+    if plan is None:
+        return FRAME_LAYOUT.pack(_snapshot_fields(snap))
     plan_values = _plan_fields(snap, plan)
     if like is None:
         return FRAME_LAYOUT.pack({**_snapshot_fields(snap), **plan_values})

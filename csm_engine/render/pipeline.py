@@ -362,15 +362,15 @@ class Pipeline:
         bounds_lo_hi = instances.bounds_lo_hi
         bounds = None if bounds_lo_hi is None else \
             (bounds_lo_hi[0].min(axis=0), bounds_lo_hi[1].max(axis=0))
-        # Fit to Visible Depth needs the G-buffer's depths before it can plan; the frame
-        # block it draws the G-buffer with needs a plan: one without cascades (the G-buffer
-        # reads only the camera from it).
+        # Fit to Visible Depth needs the G-buffer's depths before it can plan; it draws the
+        # G-buffer with a plan without cascades and a frame block without the plan's
+        # fields (the G-buffer reads only the camera from it).
         fit_to_visible = plan is None and bool(getattr(snap.settings, "fit_to_visible", False))
         if plan is None:
             plan = gbuffer_plan(snap, bounds) if fit_to_visible else plan_shadows(snap, bounds)
         self.warnings.extend(w for w in snap.warnings + plan.warnings if w not in self.warnings)
         atlas = None if fit_to_visible else self._atlas(plan)
-        frame_data = pack_frame(snap, plan)
+        frame_data = pack_frame(snap, None if fit_to_visible else plan)
         frame_ubo = self._frame_ubo(frame_data)
         self.timings["python_setup"] = time.perf_counter() - start
 
@@ -406,7 +406,7 @@ class Pipeline:
                 clip_from_world = np.asarray(tile.clip_from_world, dtype=np.float64)
                 signature = (tuple(tile.origin), tile.resolution, cull_front,
                              clip_from_world, world_from_objects[visible].tobytes(),
-                             tuple(signatures[i] for i in visible))
+                             tuple(map(signatures.__getitem__, visible.tolist())))
                 key = (tuple(tile.origin), tile.resolution)
                 if can_clear_tile and None not in signature[5] and \
                         _same_tile(held.get(key), signature):

@@ -115,6 +115,10 @@ def test_a_frame_packed_from_the_gbuffer_plan_repacks_to_the_same_bytes():
     # Bytes, not values: int fields (a spot's shadow tile -1) read as float are NaN.
     assert shadow_plan.pack_frame(snap, plan, like=first).tobytes() == \
         shadow_plan.pack_frame(snap, plan).tobytes()
+    # a block of the snapshot alone (what a Fit to Visible Depth G-buffer draws with)
+    alone = shadow_plan.pack_frame(snap, None)
+    assert shadow_plan.pack_frame(snap, plan, like=alone).tobytes() == \
+        shadow_plan.pack_frame(snap, plan).tobytes()
     # and back: a block with more tiles repacked from a plan with fewer leaves no rows
     full = shadow_plan.pack_frame(snap, plan)
     assert shadow_plan.pack_frame(snap, first_plan, like=full).tobytes() == first.tobytes()
