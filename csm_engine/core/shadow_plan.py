@@ -27,8 +27,9 @@ WINDOW_FROM_CLIP = np.array([[.5, 0, 0, .5], [0, .5, 0, .5], [0, 0, .5, .5], [0,
 MAX_ATLAS_WIDTH = 8192
 SPOT_SHADOW_RESOLUTION = 1024
 POINT_SHADOW_RESOLUTION = 512      # texels per cube face
-# Texels each cube face reaches past 90 degrees, so the widest PCF kernel (radius 3 and the
-# bilinear taps' extra texel) near a face's edge reads rendered texels.
+# Texels each cube face reaches past 90 degrees, so PCF kernels up to radius 3 (and the
+# bilinear taps' extra texel) near a face's edge read rendered texels; wider kernels and
+# soft penumbrae there read the face's edge texels again (taps are clamped to the tile).
 POINT_FACE_MARGIN_TEXELS = 4
 
 # Cascades kept while "Freeze Cascades" is on, per scene. Plain numpy data, no GPU objects.
