@@ -282,24 +282,13 @@ def test_spot_light_casts_a_shadow(empty_scene):
     from tests.bpy.engine.test_render import set_world_color
     set_world_color(scene, (0.0, 0.0, 0.0))
 
-    images = render_scene(scene, 320, 240)
-    position = images["position"]
-    brightness = images["combined"][..., :3].sum(axis=2)
-    ground = (position[..., 3] > 0.5) & (np.abs(position[..., 2]) < 1e-3)
-    rows, cols = np.nonzero(ground)
-    points = position[rows, cols, :3]
-    light = np.array(spot.location)
-    to_light = light - points
-    distance = np.linalg.norm(to_light, axis=1)
+    brightness, blocked, points = lit_ground(scene, spot.location, 320, 240)
+    to_light = np.array(spot.location) - points
     axis = -np.array(spot.matrix_world.col[2][:3])
-    in_cone = (-(to_light / distance[:, None]) @ axis) > np.cos(np.radians(30.0))
-    bvh = world_bvh(scene)
-    blocked = np.array([bvh.ray_cast(Vector(p) + Vector((0, 0, 1e-3)), Vector(d))[2] is not None
-                        and bvh.ray_cast(Vector(p) + Vector((0, 0, 1e-3)), Vector(d))[2] <
-                        dist - 1e-2
-                        for p, d, dist in zip(points, to_light / distance[:, None], distance)])
-    lit = brightness[rows, cols][in_cone & ~blocked]
-    dark = brightness[rows, cols][in_cone & blocked]
+    in_cone = (-(to_light / np.linalg.norm(to_light, axis=1)[:, None]) @ axis) > \
+        np.cos(np.radians(30.0))
+    lit = brightness[in_cone & ~blocked]
+    dark = brightness[in_cone & blocked]
     assert len(dark) > 200 and len(lit) > 200
     assert dark.mean() < 0.15 * lit.mean(), (dark.mean(), lit.mean())
     assert np.mean(dark < 0.5 * np.median(lit)) > 0.9
@@ -374,30 +363,30 @@ def boxes_round_a_point_light(empty_scene):
     return scene, light
 
 
-def point_light_ground(scene, light, width=320, height=320):
-    """Brightness of the ground pixels lit by ``light`` from their side, and whether a
-    ray cast from each to the light hits anything first."""
+def lit_ground(scene, light_location, width=320, height=320):
+    """The ground pixels of a CSM render (z = 0): their brightness, whether a ray cast from
+    each to the light at ``light_location`` hits anything first, and their world points."""
     images = render_scene(scene, width, height)
     position = images["position"]
     brightness = images["combined"][..., :3].sum(axis=2)
     ground = (position[..., 3] > 0.5) & (np.abs(position[..., 2]) < 1e-3)
     rows, cols = np.nonzero(ground)
     points = position[rows, cols, :3]
-    to_light = np.array(light.location) - points
+    to_light = np.array(light_location) - points
     distance = np.linalg.norm(to_light, axis=1)
     bvh = world_bvh(scene)
     blocked = np.zeros(len(points), dtype=bool)
     for i, (p, d, dist) in enumerate(zip(points, to_light / distance[:, None], distance)):
         hit = bvh.ray_cast(Vector(p) + Vector((0, 0, 1e-3)), Vector(d))
         blocked[i] = hit[2] is not None and hit[3] < dist - 1e-2
-    return brightness[rows, cols], blocked
+    return brightness[rows, cols], blocked, points
 
 
 def test_point_light_casts_shadows_in_every_direction(boxes_round_a_point_light):
     """A point light with Shadow on (Blender's default) casts shadows through its six cube
     faces, where a ray cast says, as in EEVEE and Cycles."""
     scene, light = boxes_round_a_point_light
-    brightness, blocked = point_light_ground(scene, light)
+    brightness, blocked, _points = lit_ground(scene, light.location)
     lit, dark = brightness[~blocked], brightness[blocked]
     assert len(dark) > 2000 and len(lit) > 2000
     assert dark.mean() < 0.05 * lit.mean(), (dark.mean(), lit.mean())
@@ -410,7 +399,7 @@ def test_point_light_casts_shadows_in_every_direction(boxes_round_a_point_light)
 def test_point_light_shadow_off_and_course_lights_cast_none(boxes_round_a_point_light):
     scene, light = boxes_round_a_point_light
     light.data.use_shadow = False
-    brightness, blocked = point_light_ground(scene, light)
+    brightness, blocked, _points = lit_ground(scene, light.location)
     lit = brightness[~blocked]
     assert brightness[blocked].mean() > 0.5 * np.median(lit), "no shadow with Shadow off"
     # The course's point lights cast no shadows (scene-format.md): imported with Shadow off.
