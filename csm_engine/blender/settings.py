@@ -175,12 +175,14 @@ class CSMSettings(bpy.types.PropertyGroup):
         description="Percentage-closer filtering kernel radius in texels: 0 = single tap, "
                     "1 = 3x3, 2 = 5x5. Larger = softer edges, slower")
     pcf_sharpen: FloatProperty(
-        name="PCF Sharpen", default=1.0, min=1.0, max=64.0, soft_max=16.0, update=_redraw,
+        name="PCF Sharpen", default=3.0, min=1.0, max=64.0, soft_max=16.0, update=_redraw,
         description="Multiplier (1 to 64) on the steepness of the filtered shadow edge "
                     "around its middle: the edge stays where the PCF kernel smooths it to, "
                     "but ramps this many times faster, and the kernel's faint spill onto lit "
-                    "ground beside a shadow or a step is cut. 1 = the kernel's own ramp. Also thresholds "
-                    "the partial shadows of alpha-hashed materials")
+                    "ground beside a shadow or a step (stripes) is cut. 1 = the kernel's own "
+                    "ramp; 3 keeps the edge anti-aliased; from about 10 the edge is as hard "
+                    "as one tap and PCF Radius hardly softens it. Alpha-hashed casters' "
+                    "partial shadows are left as they are")
     pcf_pattern: EnumProperty(
         name="PCF Pattern", items=PCF_PATTERNS, default='GRID', update=_redraw,
         description="Which neighbour taps the filter takes within the PCF radius (texels). "

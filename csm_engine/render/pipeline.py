@@ -54,7 +54,7 @@ SHADOW_TILES = {"drawn": 0, "skipped": 0}
 GBUFFERS = {"drawn": 0, "kept": 0}
 
 _BYTES_PER_TEXEL = {'RGBA32F': 16, 'RGBA16F': 8, 'R32F': 4, 'DEPTH_COMPONENT32F': 4,
-                    'RGBA8': 4}
+                    'RGBA8': 4, 'R8': 1}
 
 
 # NOTE: a stabilized cascade's x/y (texel-snapped) do not move with a small camera move, but
@@ -311,11 +311,14 @@ class Pipeline:
         return self._white
 
     def _atlas(self, plan):
-        """The shadow atlas; on allocation failure, halve resolutions and say so."""
+        """The shadow atlas (depth) and its partial-caster mask (1 where the nearest caster
+        of a texel is alpha-hashed, whose shadow is the fraction the filter finds, so PCF
+        Sharpen must leave it alone); on allocation failure, halve resolutions and say so."""
         while True:
             size = layout_atlas(plan.tiles)
             try:
-                return self._texture("atlas", size, 'DEPTH_COMPONENT32F')
+                return (self._texture("atlas", size, 'DEPTH_COMPONENT32F'),
+                        self._texture("atlas_partial", size, 'R8'))
             except Exception as error:
                 if all(t.resolution <= 64 for t in plan.tiles):
                     raise
@@ -371,7 +374,7 @@ class Pipeline:
         if plan is None:
             plan = gbuffer_plan(snap, bounds) if fit_to_visible else plan_shadows(snap, bounds)
         self.warnings.extend(w for w in snap.warnings + plan.warnings if w not in self.warnings)
-        atlas = None if fit_to_visible else self._atlas(plan)
+        atlas, partial = (None, None) if fit_to_visible else self._atlas(plan)
         frame_data = pack_frame(snap, None if fit_to_visible else plan)
         frame_ubo = self._frame_ubo(frame_data)
         self.timings["python_setup"] = time.perf_counter() - start
@@ -391,7 +394,7 @@ class Pipeline:
             """1. Shadow atlas: only tiles whose contents would change are cleared and
             drawn."""
             t = time.perf_counter()
-            atlas_fb = self._framebuffer("atlas", depth=atlas)
+            atlas_fb = self._framebuffer("atlas", depth=atlas, colors=(partial,))
             held = self._atlas_contents(atlas)
             # Blender 3.4's gpu.state has no scissor: there the whole atlas is cleared and drawn.
             can_clear_tile = hasattr(gpu.state, "scissor_set")
@@ -420,7 +423,7 @@ class Pipeline:
             self.shadow_tiles = {"drawn": len(stale), "skipped": len(plan.tiles) - len(stale)}
             with atlas_fb.bind():
                 if not can_clear_tile:
-                    self._gpu_call(atlas_fb.clear, depth=1.0)
+                    self._gpu_call(atlas_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
                 gpu.state.depth_test_set('LESS_EQUAL')
                 gpu.state.depth_mask_set(True)
                 gpu.state.face_culling_set('FRONT' if cull_front else 'NONE')
@@ -433,7 +436,7 @@ class Pipeline:
                         gpu.state.scissor_test_set(True)
                         gpu.state.scissor_set(tile.origin[0], tile.origin[1],
                                               tile.resolution, tile.resolution)
-                        self._gpu_call(atlas_fb.clear, depth=1.0)
+                        self._gpu_call(atlas_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
                         gpu.state.scissor_test_set(False)
                     if not self.skip_gpu_calls:
                         # Forget the tile's contents while it is redrawn: if drawing raises,
@@ -550,7 +553,7 @@ class Pipeline:
             t = self._sync(gbuffer[4], "depth_range", t)
             plan = plan_shadows(snap, bounds, blocks)
             self.warnings.extend(w for w in plan.warnings if w not in self.warnings)
-            atlas = self._atlas(plan)
+            atlas, partial = self._atlas(plan)
             frame_ubo = self._frame_ubo(pack_frame(snap, plan, like=frame_data))
             t = shadow_pass(t)
         else:
@@ -593,6 +596,7 @@ class Pipeline:
             lighting.uniform_sampler("gbuffer_normal", normal)
             lighting.uniform_sampler("gbuffer_depth", view_depth)
             lighting.uniform_sampler("shadow_atlas", atlas)
+            lighting.uniform_sampler("shadow_partial", partial)
             lighting.uniform_sampler("ambient_occlusion",
                                      white if ambient_occlusion is None else ambient_occlusion)
             lighting.uniform_sampler("gbuffer_emission", emission)

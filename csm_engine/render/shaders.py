@@ -56,7 +56,7 @@ PROGRAMS = {
         push=(("MAT4", "clip_from_object"),),
         samplers=(("FLOAT_2D", "base_color_texture"),),
         frame=False,
-        outputs=(("VEC4", "out_unused"),),
+        outputs=(("VEC4", "out_partial_caster"),),
     ),
     "lighting": dict(
         vertex="fullscreen_vert.glsl", fragment="lighting_frag.glsl",
@@ -65,7 +65,7 @@ PROGRAMS = {
         push=(),
         samplers=(("FLOAT_2D", "gbuffer_albedo"), ("FLOAT_2D", "gbuffer_normal"),
                   ("FLOAT_2D", "gbuffer_depth"), ("FLOAT_2D", "shadow_atlas"),
-                  ("FLOAT_2D", "gbuffer_emission")),
+                  ("FLOAT_2D", "shadow_partial"), ("FLOAT_2D", "gbuffer_emission")),
         frame=True,
         outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
     ),

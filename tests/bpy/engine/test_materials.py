@@ -357,7 +357,7 @@ def test_course_convention_reads_specular_in_blue_and_shininess_in_green(empty_s
 
 # ---- hashed alpha ------------------------------------------------------------------------
 
-def _half_transparent_plane(scene, alpha=0.5):
+def _half_transparent_plane(scene, alpha=0.5, pcf_sharpen=None):
     lit_scene(scene, world=(0.0, 0.0, 0.0))
     add_ground(40)
     glass, bsdf = principled_material("glass", base=(0.8, 0.8, 0.8))
@@ -366,16 +366,22 @@ def _half_transparent_plane(scene, alpha=0.5):
     add_plane(4.0, (0, 0, 2.0), glass)
     top_camera(scene, height=20.0, ortho_scale=8.0)
     scene.csm.pcf_radius = 2
+    if pcf_sharpen is not None:
+        scene.csm.pcf_sharpen = pcf_sharpen
     return render_scene(scene, 128, 128)
 
 
+@pytest.mark.parametrize("pcf_sharpen", [None, 1.0, 16.0], ids=["default", "sharpen 1",
+                                                               "sharpen 16"])
 @pytest.mark.parametrize("alpha", [0.5, 0.25])
-def test_hashed_alpha_covers_and_shadows_in_proportion(empty_scene, alpha):
+def test_hashed_alpha_covers_and_shadows_in_proportion(empty_scene, alpha, pcf_sharpen):
     """An alpha-Blend plane of constant alpha above the ground, seen and lit from above:
     about alpha of its pixels show the plane, and the ground under it gets about 1 - alpha
     of the sun after PCF. Opaque (the old behaviour) would be 100% and a full shadow;
-    a 0.5 cut-out 0% (or 100%) and no shadow (or a full one)."""
-    images = _half_transparent_plane(empty_scene, alpha)
+    a 0.5 cut-out 0% (or 100%) and no shadow (or a full one). PCF Sharpen leaves it so:
+    it does not threshold what the kernel reads of a hashed caster (a 25 % glass would
+    otherwise cast none)."""
+    images = _half_transparent_plane(empty_scene, alpha, pcf_sharpen)
     _save(f"hashed_alpha_{alpha}", images["combined"])
     height = images["position"][40:88, 40:88, 2]
     covered = float(np.mean(height > 1.0))

@@ -169,25 +169,28 @@ def test_larger_pcf_radius_widens_the_penumbra(pillar_field):
     scene.csm.fade_out = False
     scene.csm.blend_band = 0.0
 
-    def penumbra_pixels(radius):
+    # At the default PCF Sharpen (3) and with the kernel's own ramp (1).
+    def penumbra_pixels(radius, sharpen):
         scene.csm.pcf_radius = radius
+        scene.csm.pcf_sharpen = sharpen
         visibility = render_scene(scene, 480, 320)["aux"][..., 0]
         return int(np.sum((visibility > 0.02) & (visibility < 0.98)))
 
-    counts = [penumbra_pixels(r) for r in (0, 1, 3)]
-    assert counts[0] < 0.2 * counts[1], counts   # a single tap is a hard edge
-    assert counts[1] < counts[2], counts
+    for sharpen in (3.0, 1.0):
+        counts = [penumbra_pixels(r, sharpen) for r in (0, 1, 3)]
+        assert counts[0] < 0.2 * counts[1], counts   # a single tap is a hard edge
+        assert counts[1] < 0.6 * counts[2], counts
 
 
 def test_pcf_sharpen_keeps_the_edge_and_narrows_its_ramp(pillar_field):
-    """PCF Sharpen (off by default) steepens the filtered edge around 0.5: every pixel
+    """PCF Sharpen (3 by default) steepens the filtered edge around 0.5: every pixel
     stays on its side of the edge (the same pixels are shadowed), the ramp gets narrower,
     and lit ground that the 3x3 kernel reached from a shadow edge or a box's base becomes
     fully lit."""
     scene, _ = pillar_field
     scene.csm.fade_out = False
     scene.csm.blend_band = 0.0
-    assert scene.csm.pcf_sharpen == 1.0 and scene.csm.pcf_radius == 1
+    assert scene.csm.pcf_sharpen == 3.0 and scene.csm.pcf_radius == 1
 
     def visibility(sharpen):
         scene.csm.pcf_sharpen = sharpen

@@ -63,6 +63,9 @@ def test_flat_ground_short_of_lit_is_split_by_whether_it_touches_a_shadow():
     assert result.flat_lit_ground_full_pixels == 7
     assert result.flat_lit_ground_short_at_edge_pixels == 1
     assert result.flat_ground_short_at_edge_fraction == pytest.approx(0.5)
+    # Without the three flat lit pixels touching the shadow, 5 of the other 6 are lit.
+    assert result.flat_lit_ground_at_edge_pixels == 3
+    assert result.flat_ground_away_from_edges_full_fraction == pytest.approx(5.0 / 6.0)
 
 
 def test_blurring_a_hard_edge_toward_the_reference_lowers_the_error():
