@@ -206,7 +206,8 @@ class _DrawLists:
     with them: the same items (``_kept_draw_items`` keeps them while meshes, materials and
     textures are the same) give the same answers. Per instance: whether each G-buffer
     pass of _GBUFFER_PASSES and each shadow program (opaque, alpha-masked) draws it."""
-    __slots__ = ("items", "writes_emission", "gbuffer_masks", "shadow_masks", "signatures")
+    __slots__ = ("items", "writes_emission", "gbuffer_masks", "shadow_masks", "partial_mask",
+                 "signatures")
 
     def __init__(self, items):
         self.items = items
@@ -217,6 +218,11 @@ class _DrawLists:
             for _program, slot, tangents, _textured in _GBUFFER_PASSES)
         self.shadow_masks = tuple(np.array([bool(entry[2 + masked]) for entry in items],
                                            dtype=bool) for masked in (0, 1))
+        # Which instances have an alpha-hashed shadow material (the atlas's partial-caster
+        # mask draws only those).
+        self.partial_mask = np.array([any(material.shadow_mode == 'HASHED'
+                                          for _batch, material in entry[3])
+                                      for entry in items], dtype=bool)
         self.signatures = None      # Pipeline._caster_signatures, asked for once
 
 
@@ -394,7 +400,7 @@ class Pipeline:
             """1. Shadow atlas: only tiles whose contents would change are cleared and
             drawn."""
             t = time.perf_counter()
-            atlas_fb = self._framebuffer("atlas", depth=atlas, colors=(partial,))
+            atlas_fb = self._framebuffer("atlas", depth=atlas)
             held = self._atlas_contents(atlas)
             # Blender 3.4's gpu.state has no scissor: there the whole atlas is cleared and drawn.
             can_clear_tile = hasattr(gpu.state, "scissor_set")
@@ -423,7 +429,7 @@ class Pipeline:
             self.shadow_tiles = {"drawn": len(stale), "skipped": len(plan.tiles) - len(stale)}
             with atlas_fb.bind():
                 if not can_clear_tile:
-                    self._gpu_call(atlas_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+                    self._gpu_call(atlas_fb.clear, depth=1.0)
                 gpu.state.depth_test_set('LESS_EQUAL')
                 gpu.state.depth_mask_set(True)
                 gpu.state.face_culling_set('FRONT' if cull_front else 'NONE')
@@ -436,7 +442,7 @@ class Pipeline:
                         gpu.state.scissor_test_set(True)
                         gpu.state.scissor_set(tile.origin[0], tile.origin[1],
                                               tile.resolution, tile.resolution)
-                        self._gpu_call(atlas_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+                        self._gpu_call(atlas_fb.clear, depth=1.0)
                         gpu.state.scissor_test_set(False)
                     if not self.skip_gpu_calls:
                         # Forget the tile's contents while it is redrawn: if drawing raises,
@@ -449,6 +455,31 @@ class Pipeline:
                     if not self.skip_gpu_calls:
                         held[key] = signature
                 gpu.state.face_culling_set('NONE')
+            # The partial-caster mask of the redrawn tiles: cleared, then marked by their
+            # alpha-hashed casters against the finished depth (depth writes off).
+            partial_fb = self._framebuffer("atlas_partial", depth=atlas, colors=(partial,))
+            with partial_fb.bind():
+                clear = (0.0, 0.0, 0.0, 0.0)
+                if not can_clear_tile:
+                    self._gpu_call(partial_fb.clear, color=clear)
+                gpu.state.depth_test_set('LESS_EQUAL')
+                gpu.state.depth_mask_set(False)
+                gpu.state.face_culling_set('FRONT' if cull_front else 'NONE')
+                for tile, visible, key, signature in stale:
+                    gpu.state.viewport_set(tile.origin[0], tile.origin[1],
+                                           tile.resolution, tile.resolution)
+                    if can_clear_tile:
+                        gpu.state.scissor_test_set(True)
+                        gpu.state.scissor_set(tile.origin[0], tile.origin[1],
+                                              tile.resolution, tile.resolution)
+                        self._gpu_call(partial_fb.clear, color=clear)
+                        gpu.state.scissor_test_set(False)
+                    if len(visible) and lists.partial_mask[visible].any():
+                        self._draw_casters(library, items, lists.shadow_masks,
+                                           world_from_objects, tile, visible, mirrored,
+                                           cull_front, partial_mask=lists.partial_mask)
+                gpu.state.face_culling_set('NONE')
+                gpu.state.depth_mask_set(True)
             t = self._sync(atlas_fb, "shadow", t)
             return t
 
@@ -664,23 +695,30 @@ class Pipeline:
         return blurred
 
     def _draw_casters(self, library, items, shadow_masks, world_from_objects, tile, visible,
-                      mirrored, cull_front):
+                      mirrored, cull_front, partial_mask=None):
+        """Draw the shadow casters ``visible`` (instance indices) into ``tile``: opaque,
+        then alpha-masked. With ``partial_mask`` (per instance: has an alpha-hashed shadow
+        material) only the hashed materials, with the partial-caster mask's program."""
         import gpu
         clip_from_objects = _column_major_stack(tile.clip_from_world @
                                                 world_from_objects[visible])
         default = 'FRONT' if cull_front else 'NONE'
         culling = default
-        for masked in (False, True):
-            rows = np.flatnonzero(shadow_masks[masked][visible])
+        for masked in ((True,) if partial_mask is not None else (False, True)):
+            rows = np.flatnonzero((shadow_masks[masked] if partial_mask is None
+                                   else partial_mask)[visible])
             if not len(rows):
                 continue
-            shadow = library.get("shadow_masked" if masked else "shadow")
+            shadow = library.get("shadow_partial" if partial_mask is not None else
+                                 "shadow_masked" if masked else "shadow")
             shadow.bind()
             bound = None
             for row, index in zip(rows.tolist(), visible[rows].tolist()):
                 draws = items[index][2 + masked]
                 shadow.uniform_float("clip_from_object", clip_from_objects[row])
                 for batch, material in draws:
+                    if partial_mask is not None and material.shadow_mode != 'HASHED':
+                        continue
                     # 4.2+ "Backface Culling" of shadows: the faces turned away from the
                     # light (the winding turned around for a mirrored instance).
                     wanted = ('FRONT' if mirrored[index] else 'BACK') \
@@ -688,7 +726,8 @@ class Pipeline:
                     if wanted != culling:
                         gpu.state.face_culling_set(wanted)
                         culling = wanted
-                    if masked and material is not bound:   # the opaque program has none
+                    if masked and partial_mask is None and material is not bound:
+                        # (the opaque and partial-caster programs have no material)
                         shadow.uniform_block("material", material.block)
                         shadow.uniform_sampler("base_color_texture", material.textures[0])
                         bound = material

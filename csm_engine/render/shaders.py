@@ -123,6 +123,10 @@ PROGRAMS = {
 for _name in ("gbuffer", "shadow"):
     PROGRAMS[_name + "_masked"] = dict(PROGRAMS[_name], defines=(("ALPHA_MASK", "1"),),
                                        material=True)
+# The partial-caster mask of the shadow atlas (shadow_frag.glsl, PARTIAL_CASTER): alpha-hashed
+# casters drawn once more, without discarding, into the mask.
+PROGRAMS["shadow_partial"] = dict(PROGRAMS["shadow"], defines=(("PARTIAL_CASTER", "1"),),
+                                  samplers=())
 # Materials without images: no texture reads at all (llvmpipe pays for a sample behind an
 # `if` that skips it), so no samplers to bind either.
 PROGRAMS["gbuffer_untextured"] = dict(PROGRAMS["gbuffer"], defines=(("UNTEXTURED", "1"),),

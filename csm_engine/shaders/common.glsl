@@ -50,7 +50,7 @@ float shadow_tap(vec2 origin, float last_texel, vec2 tap, vec2 receiver, float c
   return texelFetch(shadow_atlas, ivec2(texel) + ivec2(origin), 0).r < compare ? 0.0 : 1.0;
 }
 
-/* The atlas's partial-caster mask (1: an alpha-hashed caster) at the texel a tap reads. */
+/* The atlas's partial-caster mask (1: under an alpha-hashed caster) at a texel. */
 float partial_caster_at(vec2 origin, float last_texel, vec2 tap)
 {
   vec2 texel = clamp(floor(tap), vec2(0.0), vec2(last_texel));
@@ -261,9 +261,6 @@ float shadow_tile_visibility(ShadowTileData tile, vec3 p, vec3 n, float n_dot_l,
    * with separable weights: the same footprint as hard taps, but edges ramp smoothly
    * instead of in texel-sized stair steps. */
   int last = (pattern == PCF_GRID && radius > 0) ? 2 * radius + 1 : -1;
-  /* Whether an alpha-hashed caster is among the texels read (the atlas's partial-caster
-   * mask, see shadow_frag.glsl): then PCF Sharpen is not applied. */
-  float partial = 0.0;
   vec2 corner = texel - 0.5;
   vec2 base = floor(corner);
   vec2 f = corner - base;
@@ -283,8 +280,6 @@ float shadow_tile_visibility(ShadowTileData tile, vec3 p, vec3 n, float n_dot_l,
       vec2 block = clamp(base + vec2(float(2 * bx - radius), float(2 * by - radius)),
                          vec2(0.0), vec2(last_texel - 1.0));
       vec4 stored = textureGather(shadow_atlas, (origin + block + 1.0) * atlas_step);
-      vec4 hashed = textureGather(shadow_partial, (origin + block + 1.0) * atlas_step);
-      partial = max(partial, max(max(hashed.x, hashed.y), max(hashed.z, hashed.w)));
       float plane = compare + dot(depth_per_texel, block + 0.5 - texel);
       vec4 planes = plane + vec4(depth_per_texel.y, depth_per_texel.x + depth_per_texel.y,
                                  depth_per_texel.x, 0.0);
@@ -298,7 +293,6 @@ float shadow_tile_visibility(ShadowTileData tile, vec3 p, vec3 n, float n_dot_l,
       float wx = (x == 0) ? 1.0 - f.x : ((x == last) ? f.x : 1.0);
       vec2 center = base + vec2(float(x - radius), float(y - radius)) + 0.5;
       lit += wx * wy * shadow_tap(origin, last_texel, center, texel, compare, depth_per_texel);
-      partial = max(partial, partial_caster_at(origin, last_texel, center));
     }
   }
 #endif
@@ -308,17 +302,16 @@ float shadow_tile_visibility(ShadowTileData tile, vec3 p, vec3 n, float n_dot_l,
   for (int k = 0; k < taps; k++) {
     lit += shadow_tap(origin, last_texel, texel + r * TAP_PATTERN_OFFSETS[k], texel, compare,
                       depth_per_texel);
-    partial = max(partial, partial_caster_at(origin, last_texel,
-                                             texel + r * TAP_PATTERN_OFFSETS[k]));
   }
   /* PCF Sharpen: steeper around 0.5, so the edge stays where the kernel smoothed it to
    * (no texel stair steps) while its ramp narrows, and a kernel reaching a little over a
    * shadow edge or onto a step beside lit ground leaves that ground fully lit (the plain
    * 3x3 ramp leaves faint stripes along voxel edges). After Unreal's Shadow Filter
-   * Sharpen. Not where an alpha-hashed caster was read: its shadow is the share of its
-   * texels the kernel finds, which sharpening would threshold away. */
+   * Sharpen. Not under an alpha-hashed caster (the atlas's partial-caster mask at this
+   * texel, see shadow_frag.glsl): its shadow is the share of its texels the kernel
+   * finds, which sharpening would threshold away. */
   float filtered = lit / float(last >= 0 ? (last * last) : taps);
-  float sharpen = partial > 0.5 ? 1.0 : frame.pcf_sharpen;
+  float sharpen = partial_caster_at(origin, last_texel, texel) > 0.5 ? 1.0 : frame.pcf_sharpen;
   return clamp((filtered - 0.5) * sharpen + 0.5, 0.0, 1.0);
 #endif
 }
