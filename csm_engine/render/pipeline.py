@@ -6,7 +6,9 @@ own (``view_draw``) or an offscreen one that ``render()`` reads back. Both go th
 ``Pipeline.draw``, so the viewport and a final render of the same camera agree.
 
 Passes per frame:
-1. shadow: one depth-only tile per cascade (and per shadowed spot light) in one atlas;
+1. shadow: one depth-only tile per cascade (and per shadowed spot or point light face) in
+   one atlas, and beside it a one-byte partial-caster mask that the alpha-hashed casters
+   mark (PCF Sharpen leaves their partial shadows alone);
 2. G-buffer: albedo+specular, normal+shininess, view depth (0 = background), emission+
    metallic, depth (materials: one uniform block each, core/material_layout.py); world
    positions are rebuilt from view depth in the lighting pass (``world_positions`` here);
