@@ -457,31 +457,8 @@ class Pipeline:
                     if not self.skip_gpu_calls:
                         held[key] = signature
                 gpu.state.face_culling_set('NONE')
-            # The partial-caster mask of the redrawn tiles: cleared, then marked by their
-            # alpha-hashed casters against the finished depth (depth writes off).
-            partial_fb = self._framebuffer("atlas_partial", depth=atlas, colors=(partial,))
-            with partial_fb.bind():
-                clear = (0.0, 0.0, 0.0, 0.0)
-                if not can_clear_tile:
-                    self._gpu_call(partial_fb.clear, color=clear)
-                gpu.state.depth_test_set('LESS_EQUAL')
-                gpu.state.depth_mask_set(False)
-                gpu.state.face_culling_set('FRONT' if cull_front else 'NONE')
-                for tile, visible, key, signature in stale:
-                    gpu.state.viewport_set(tile.origin[0], tile.origin[1],
-                                           tile.resolution, tile.resolution)
-                    if can_clear_tile:
-                        gpu.state.scissor_test_set(True)
-                        gpu.state.scissor_set(tile.origin[0], tile.origin[1],
-                                              tile.resolution, tile.resolution)
-                        self._gpu_call(partial_fb.clear, color=clear)
-                        gpu.state.scissor_test_set(False)
-                    if len(visible) and lists.partial_mask[visible].any():
-                        self._draw_casters(library, items, lists.shadow_masks,
-                                           world_from_objects, tile, visible, mirrored,
-                                           cull_front, partial_mask=lists.partial_mask)
-                gpu.state.face_culling_set('NONE')
-                gpu.state.depth_mask_set(True)
+            self._draw_partial_mask(library, items, lists, atlas, partial, stale,
+                                    world_from_objects, mirrored, cull_front, can_clear_tile)
             t = self._sync(atlas_fb, "shadow", t)
             return t
 
@@ -695,6 +672,49 @@ class Pipeline:
         if not self.skip_gpu_calls:
             self._textures["ao_contents"] = (blurred, inputs)
         return blurred
+
+    def _draw_partial_mask(self, library, items, lists, atlas, partial, stale,
+                           world_from_objects, mirrored, cull_front, can_clear_tile):
+        """The atlas's partial-caster mask for the redrawn tiles ``stale``: cleared, then
+        marked by their alpha-hashed casters against the finished depth (depth writes
+        off). A scene without hashed casters draws nothing here once the mask is clear."""
+        import gpu
+        held = self._textures.get("atlas_partial_marks")
+        new = held is None or held[0] is not partial
+        if new:
+            # [texture, whether it may hold marks]: a new texture holds anything.
+            held = self._textures["atlas_partial_marks"] = [partial, True]
+        hashed = bool(lists.partial_mask.any())
+        if not hashed and not held[1]:
+            return
+        clear = (0.0, 0.0, 0.0, 0.0)
+        partial_fb = self._framebuffer("atlas_partial", depth=atlas, colors=(partial,))
+        with partial_fb.bind():
+            cleared = new or not hashed or not can_clear_tile
+            if cleared:
+                self._gpu_call(partial_fb.clear, color=clear)
+            held[1] = hashed
+            if not hashed:
+                return
+            gpu.state.depth_test_set('LESS_EQUAL')
+            gpu.state.depth_mask_set(False)
+            gpu.state.face_culling_set('FRONT' if cull_front else 'NONE')
+            for tile, visible, _key, _signature in stale:
+                gpu.state.viewport_set(tile.origin[0], tile.origin[1],
+                                       tile.resolution, tile.resolution)
+                if not cleared:
+                    # NOTE: a clear honours the scissor box, not the viewport.
+                    gpu.state.scissor_test_set(True)
+                    gpu.state.scissor_set(tile.origin[0], tile.origin[1],
+                                          tile.resolution, tile.resolution)
+                    self._gpu_call(partial_fb.clear, color=clear)
+                    gpu.state.scissor_test_set(False)
+                if len(visible) and lists.partial_mask[visible].any():
+                    self._draw_casters(library, items, lists.shadow_masks,
+                                       world_from_objects, tile, visible, mirrored,
+                                       cull_front, partial_mask=lists.partial_mask)
+            gpu.state.face_culling_set('NONE')
+            gpu.state.depth_mask_set(True)
 
     def _draw_casters(self, library, items, shadow_masks, world_from_objects, tile, visible,
                       mirrored, cull_front, partial_mask=None):
