@@ -436,16 +436,7 @@ class Pipeline:
                 gpu.state.depth_mask_set(True)
                 gpu.state.face_culling_set('FRONT' if cull_front else 'NONE')
                 for tile, visible, key, signature in stale:
-                    gpu.state.viewport_set(tile.origin[0], tile.origin[1],
-                                           tile.resolution, tile.resolution)
-                    # NOTE: a clear honours the scissor box, not the viewport: without it the
-                    # whole atlas (the other tiles too) would be cleared.
-                    if can_clear_tile:
-                        gpu.state.scissor_test_set(True)
-                        gpu.state.scissor_set(tile.origin[0], tile.origin[1],
-                                              tile.resolution, tile.resolution)
-                        self._gpu_call(atlas_fb.clear, depth=1.0)
-                        gpu.state.scissor_test_set(False)
+                    self._begin_tile(atlas_fb, tile, dict(depth=1.0) if can_clear_tile else None)
                     if not self.skip_gpu_calls:
                         # Forget the tile's contents while it is redrawn: if drawing raises,
                         # the next frame draws it again.
@@ -673,6 +664,21 @@ class Pipeline:
             self._textures["ao_contents"] = (blurred, inputs)
         return blurred
 
+    def _begin_tile(self, fb, tile, clear=None):
+        """Draw into ``tile`` of the bound ``fb`` from now on; with ``clear`` (``fb.clear``'s
+        arguments) clear that tile first, and only it."""
+        import gpu
+        gpu.state.viewport_set(tile.origin[0], tile.origin[1], tile.resolution,
+                               tile.resolution)
+        if clear:
+            # NOTE: a clear honours the scissor box, not the viewport: without it the whole
+            # atlas (the other tiles too) would be cleared.
+            gpu.state.scissor_test_set(True)
+            gpu.state.scissor_set(tile.origin[0], tile.origin[1], tile.resolution,
+                                  tile.resolution)
+            self._gpu_call(fb.clear, **clear)
+            gpu.state.scissor_test_set(False)
+
     def _draw_partial_mask(self, library, items, lists, atlas, partial, stale,
                            world_from_objects, mirrored, cull_front, can_clear_tile):
         """The atlas's partial-caster mask for the redrawn tiles ``stale``: cleared, then
@@ -700,15 +706,7 @@ class Pipeline:
             gpu.state.depth_mask_set(False)
             gpu.state.face_culling_set('FRONT' if cull_front else 'NONE')
             for tile, visible, _key, _signature in stale:
-                gpu.state.viewport_set(tile.origin[0], tile.origin[1],
-                                       tile.resolution, tile.resolution)
-                if not cleared:
-                    # NOTE: a clear honours the scissor box, not the viewport.
-                    gpu.state.scissor_test_set(True)
-                    gpu.state.scissor_set(tile.origin[0], tile.origin[1],
-                                          tile.resolution, tile.resolution)
-                    self._gpu_call(partial_fb.clear, color=clear)
-                    gpu.state.scissor_test_set(False)
+                self._begin_tile(partial_fb, tile, None if cleared else dict(color=clear))
                 if len(visible) and lists.partial_mask[visible].any():
                     self._draw_casters(library, items, lists.shadow_masks,
                                        world_from_objects, tile, visible, mirrored,
