@@ -319,9 +319,10 @@ class Pipeline:
         return self._white
 
     def _atlas(self, plan):
-        """The shadow atlas (depth) and its partial-caster mask (1 where the nearest caster
-        of a texel is alpha-hashed, whose shadow is the fraction the filter finds, so PCF
-        Sharpen must leave it alone); on allocation failure, halve resolutions and say so."""
+        """The shadow atlas (depth) and its partial-caster mask (1 where an alpha-hashed
+        caster lies in front of what a texel holds: its shadow is the share of texels the
+        filter finds, which PCF Sharpen must leave alone, see ``_draw_partial_mask``); on
+        allocation failure, halve resolutions and say so."""
         while True:
             size = layout_atlas(plan.tiles)
             try:
@@ -724,19 +725,21 @@ class Pipeline:
                                                 world_from_objects[visible])
         default = 'FRONT' if cull_front else 'NONE'
         culling = default
-        for masked in ((True,) if partial_mask is not None else (False, True)):
-            rows = np.flatnonzero((shadow_masks[masked] if partial_mask is None
-                                   else partial_mask)[visible])
+        # (program, which instances it draws, their draw-list slot, whether it reads the
+        # material): the partial-caster mask draws only the hashed materials of slot 3.
+        passes = (("shadow_partial", partial_mask, 3, False),) if partial_mask is not None \
+            else (("shadow", shadow_masks[0], 2, False),
+                  ("shadow_masked", shadow_masks[1], 3, True))
+        for program, drawn, slot, reads_material in passes:
+            rows = np.flatnonzero(drawn[visible])
             if not len(rows):
                 continue
-            shadow = library.get("shadow_partial" if partial_mask is not None else
-                                 "shadow_masked" if masked else "shadow")
+            shadow = library.get(program)
             shadow.bind()
             bound = None
             for row, index in zip(rows.tolist(), visible[rows].tolist()):
-                draws = items[index][2 + masked]
                 shadow.uniform_float("clip_from_object", clip_from_objects[row])
-                for batch, material in draws:
+                for batch, material in items[index][slot]:
                     if partial_mask is not None and material.shadow_mode != 'HASHED':
                         continue
                     # 4.2+ "Backface Culling" of shadows: the faces turned away from the
@@ -746,8 +749,7 @@ class Pipeline:
                     if wanted != culling:
                         gpu.state.face_culling_set(wanted)
                         culling = wanted
-                    if masked and partial_mask is None and material is not bound:
-                        # (the opaque and partial-caster programs have no material)
+                    if reads_material and material is not bound:
                         shadow.uniform_block("material", material.block)
                         shadow.uniform_sampler("base_color_texture", material.textures[0])
                         bound = material
