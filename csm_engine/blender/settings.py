@@ -154,7 +154,8 @@ class CSMSettings(bpy.types.PropertyGroup):
         name="Stabilize", default=True, update=_redraw,
         description="Fit each cascade with a bounding sphere and snap it to whole texels, so "
                     "shadow edges do not shimmer when the camera moves or turns. Off: tighter "
-                    "fit, more resolution, but edges swim")
+                    "fit (with Fit to Visible Depth, exactly the visible receivers), more "
+                    "resolution, but edges swim")
     fade_out: BoolProperty(
         name="Fade Out", default=True, update=_redraw,
         description="Fade shadows out over the last part of the shadow distance instead of "

@@ -566,7 +566,8 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
     - ``stabilize`` (default on): square box around the slice's bounding sphere, radius
       rounded up and centre snapped to whole texels, so the map neither rescales when the
       camera turns nor slides by fractions of a texel when it moves. Off: the tight
-      light-space AABB of the corners (more resolution, but edges swim).
+      light-space AABB of the corners, cut to ``receiver_box`` when one is given (more
+      resolution, but edges swim).
     - ``occluder_margin``: scene units the near plane is pulled back toward the light so
       casters outside the slice still cast into it.
     - ``scene_bounds``: optional world AABB ``(min, max)``; the near plane then also reaches
@@ -578,7 +579,8 @@ def fit_cascade(slice_corners_world, light_from_world_rot, resolution, stabilize
       the square the visible receivers of this slice need (``receiver_square``), used
       instead of the sphere when it is smaller (sample-distribution shadow maps). Its half
       width is already quantized, so with ``stabilize`` the texel size still only changes
-      in coarse steps, and the centre is snapped to texels as the sphere's is.
+      in coarse steps, and the centre is snapped to texels as the sphere's is. Without
+      ``stabilize`` it is exact, and the box is the corners' box cut to it.
 
     The far plane is the slice's far side: receivers only exist inside the slice.
     """
@@ -665,6 +667,15 @@ def _fit_checked(corners, rotation, resolution, stabilize, margin, scene_near,
     else:
         corners_rot = corners @ rotation.T
         low_xy, high_xy = corners_rot[:, :2].min(axis=0), corners_rot[:, :2].max(axis=0)
+        if receiver_box is not None:
+            # Only the part of the slice's box that holds visible receivers: the tightest
+            # fit, for a still image (it moves and rescales with every camera step).
+            centre_box = np.asarray(receiver_box[0], dtype=np.float64)
+            half_box = np.asarray(receiver_box[1], dtype=np.float64)
+            cut_low = np.maximum(low_xy, centre_box - half_box)
+            cut_high = np.minimum(high_xy, centre_box + half_box)
+            if np.all(cut_high > cut_low):
+                low_xy, high_xy = cut_low, cut_high
         # A slice seen edge-on by the light is flat in one axis; keep the box non-empty.
         spread = max(float(np.max(high_xy - low_xy)), 1e-9)
         pad = np.maximum(0.0, 1e-6 * spread - (high_xy - low_xy)) * 0.5
@@ -743,7 +754,8 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
       divide that range instead of clip start .. shadow distance, so no cascade is spent
       on empty depth. Clamped to the clip start .. shadow distance.
     - ``depth_blocks``: the visible receivers per screen block (see ``receiver_square``):
-      each stabilized cascade then covers only the square its receivers need, when that is
+      each cascade then covers only the rectangle its receivers need (stabilized: rounded
+      and held; unstabilized: exactly), when that is
       smaller than its slice's sphere; ``previous_squares`` (per cascade, the half widths
       of the last frame) hold those squares still while they fit.
 
@@ -812,11 +824,12 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
             centre_view, radius = view_sphere
             sphere = (_transform_points(world_from_view, centre_view[None])[0], radius)
         square = None
-        if depth_blocks is not None and stabilize:
-            previous = previous_squares[index] if previous_squares is not None and \
-                index < len(previous_squares) else None
+        if depth_blocks is not None:
+            previous = previous_squares[index] if stabilize and previous_squares is not None \
+                and index < len(previous_squares) else None
             square = receiver_square(world_from_view, projection, depth_blocks, slice_near,
-                                     splits[index + 1], rotation, previous)
+                                     splits[index + 1], rotation, previous,
+                                     exact=not stabilize)
         fit = _fit_checked(_slice_corners(corners), rotation[:3, :3], resolution,
                            stabilize, margin, scene_near, sphere, square)
         fit.receiver_rectangle = square
@@ -897,7 +910,7 @@ def _receiver_terms(world_from_view, projection, blocks, light_from_world_rot):
 
 
 def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
-                    light_from_world_rot, previous=None, shrink_below=0.7):
+                    light_from_world_rot, previous=None, shrink_below=0.7, exact=False):
     """The rectangle (centre_xy, half_widths_xy) in the rotated light frame that holds every
     visible receiver between view depths ``near_depth`` and ``far_depth``, or None when no
     receiver is there.
@@ -908,7 +921,9 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
     NOTE: each half width is rounded up to 1/8 of its leading power of two, and the
     ``previous`` rectangle (centre, half widths) is kept while the receivers still fit in
     it and it is less than 1/``shrink_below`` of what they need: small camera moves then
-    leave the cascade where it was, and the texel size changes rarely, by whole steps."""
+    leave the cascade where it was, and the texel size changes rarely, by whole steps.
+    ``exact``: the receivers' own extent, neither rounded nor held (unstabilized
+    cascades)."""
     _ndc_low, _ndc_high, nearest, farthest = blocks
     # Indices, not a mask: ``take`` is several times faster than boolean indexing here.
     inside = np.flatnonzero((farthest >= near_depth) & (nearest <= far_depth))
@@ -941,6 +956,9 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
         low.append(float(least) + float(offset[axis]))
         high.append(float(greatest) + float(offset[axis]))
     centre = [0.5 * (lo + hi) for lo, hi in zip(low, high)]
+    if exact:
+        return np.array(centre), np.array([max(0.5 * (hi - lo), 1e-9)
+                                           for lo, hi in zip(low, high)])
     half = [_round_up_dyadic(max(0.5 * (hi - lo), 1e-9), bits=4) for lo, hi in zip(low, high)]
     if previous is not None:
         old_centre, old_half = (np.asarray(v, dtype=np.float64) for v in previous)

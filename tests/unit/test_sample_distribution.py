@@ -75,6 +75,51 @@ def test_fitted_cascades_use_smaller_texels_than_the_sphere():
         assert b.texel_size_world < a.texel_size_world
 
 
+def test_unstabilized_cascades_fit_the_receivers_exactly():
+    """Stabilize off is the tightest fit: each cascade's box is its slice's box cut to the
+    receivers' exact (unrounded) rectangle, never wider than the stabilized fit, and it
+    still holds every receiver the slice shows (before, Stabilize off ignored the
+    receivers and was looser than on)."""
+    sun = np.array([0.3, 0.2, -1.0])
+    world_from_view = np.eye(4)
+    world_from_view[:3, 3] = (5.0, -3.0, 2.0)
+    # The receivers only fill the screen's lower 4 block rows of 9 (sky above).
+    rows, cols = 9, 16
+    pairs = np.empty((rows, cols, 2))
+    pairs[..., 0], pairs[..., 1] = 20.0, 60.0
+    pairs[rows // 2:] = (3.0e38, 0.0)
+    blocks = depth_blocks_from_reduction(pairs, 16, cols * 16, rows * 16)
+    kwargs = dict(depth_range=(20.0, 60.0), depth_blocks=blocks)
+    stable = cascades.compute_cascades(world_from_view, PROJECTION, sun, **kwargs)
+    tight = cascades.compute_cascades(world_from_view, PROJECTION, sun, stabilize=False,
+                                      **kwargs)
+    no_receivers = cascades.compute_cascades(world_from_view, PROJECTION, sun,
+                                             stabilize=False, depth_range=(20.0, 60.0))
+    rotation = cascades.light_view_matrix(sun)
+    for s, t, loose in zip(stable.cascades, tight.cascades, no_receivers.cascades):
+        width_t, width_s = t.box_max[:2] - t.box_min[:2], s.box_max[:2] - s.box_min[:2]
+        assert np.all(width_t <= width_s + 1e-9)
+        # The rectangle is exact: the box is the receivers' extent, not rounded up.
+        centre, half = cascades.receiver_square(world_from_view, PROJECTION, blocks,
+                                                t.split_near, t.split_far, rotation,
+                                                exact=True)
+        assert np.all(width_t <= 2.0 * half + 1e-9)
+        # Most of the screen is sky: the receivers need visibly less than the slice.
+        assert (width_t[0] * width_t[1] <
+                0.9 * np.prod(loose.box_max[:2] - loose.box_min[:2]))
+        # Every receiver corner of the slice (the screen's lower 4 of 9 block rows) is
+        # inside.
+        left, right, bottom, top = PROJECTION.view_window()
+        points = [world_from_view[:3, :3] @ (x * d, y * d, -d) + world_from_view[:3, 3]
+                  for x in np.linspace(left, right, 9)
+                  for y in np.linspace(bottom, bottom + (top - bottom) * 4 / 9, 5)
+                  for d in (max(t.split_near, 20.0), t.split_far)]
+        in_light = (t.light_from_world[:2, :3] @ np.asarray(points).T +
+                    t.light_from_world[:2, 3:4]).T
+        assert np.all(in_light >= t.box_min[:2] - 1e-6)
+        assert np.all(in_light <= t.box_max[:2] + 1e-6)
+
+
 def test_window_normal_gives_the_receiver_planes_depth_slope():
     fit = cascades.compute_cascades(np.eye(4), PROJECTION, np.array([0.3, 0.2, -1.0]),
                                     count=1).cascades[0]
