@@ -76,3 +76,26 @@ def test_markdown_section_is_rewritten_and_prose_kept(quick_run):
     none = _point(report, "none")["result"]
     assert f"{none['false_shadow_percent']:.3f}" in text
     assert "images/acne_none.png" in text
+
+
+def _sweep_point(report, setting, value):
+    matches = [p for p in report["points"] if p["group"] == "sweep"
+               and p["setting"] == setting and p["value"] == value]
+    assert len(matches) == 1
+    return matches[0]["result"]
+
+
+def test_sharpen_sweep_shows_the_faint_shadow_on_lit_ground(quick_run):
+    """PCF Sharpen moves no pixel across half lit, so mismatch cannot show it; the fully
+    lit figures must: the 3x3 kernel's spill onto lit ground at Sharpen 1 is mostly gone
+    at 16, counted in real pixels, and the report's lit-ground table shows both."""
+    out, report = quick_run
+    plain, sharp = (_sweep_point(report, "pcf_sharpen", 1.0),
+                    _sweep_point(report, "pcf_sharpen", 16.0))
+    assert abs(sharp["mismatch_percent"] - plain["mismatch_percent"]) < 0.05
+    assert plain["partial_on_lit_pixels"] > 20
+    assert sharp["partial_on_lit_pixels"] < 0.5 * plain["partial_on_lit_pixels"]
+    text = (out / "shadow-acne.md").read_text(encoding="utf-8")
+    assert "Fully lit pixels" in text
+    assert f"| 1 | {plain['partial_on_lit_percent']:.2f} / " in text
+    assert f"| 16 | {sharp['partial_on_lit_percent']:.2f} / " in text
