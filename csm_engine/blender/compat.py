@@ -6,7 +6,9 @@ memory copy) and through the older per-element paths before; corner normals (4.1
 the Principled BSDF's renamed specular and emission inputs; material alpha, shadow and
 culling settings (``blend_method``/``shadow_method`` up to 4.1, ``surface_render_method``/
 ``use_transparent_shadow`` from 4.2); MikkTSpace tangents; the glTF importer of 3.4/3.5 that needs
-``np.bool``; and the exit that pip bpy 4.2 needs to keep a process's exit code. Callers ask
+``np.bool``; an object's Shadow Terminator Geometry Offset (Object in 5.0, the Cycles
+add-on's ``object.cycles`` before); and the exit that pip bpy 4.2 needs to keep a
+process's exit code. Callers ask
 for what they need and never test versions themselves.
 """
 
@@ -53,6 +55,21 @@ def material_backface_culling_shadow(material):
     """Backface culling in the shadow pass: 4.2+'s own setting; before, shadows of every
     material were drawn from both sides."""
     return bool(getattr(material, "use_backface_culling_shadow", False))
+
+
+# Blender's default Shadow Terminator Geometry Offset (Object > Shading), also what an
+# object has when the Cycles add-on that holds the setting before 5.0 is not enabled.
+DEFAULT_TERMINATOR_OFFSET = 0.1
+
+
+def terminator_geometry_offset(obj):
+    """The object's Shadow Terminator Geometry Offset: ``Object`` property in 5.0+, the
+    Cycles add-on's ``object.cycles`` property in 3.x/4.x."""
+    value = getattr(obj, "shadow_terminator_geometry_offset", None)
+    if value is None:
+        value = getattr(getattr(obj, "cycles", None), "shadow_terminator_geometry_offset",
+                        DEFAULT_TERMINATOR_OFFSET)
+    return float(value)
 
 
 def corner_tangents(mesh, uv_name=""):

@@ -12,6 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from . import compat
 from ..core.camera import CameraView
 from ..core.frame import FrameSnapshot, MeshInstance, PointLight, SpotLight, Sun
 from ..core.frame_layout import MAX_POINT_LIGHTS, MAX_SPOT_LIGHTS
@@ -281,7 +282,8 @@ def take(depsgraph, camera, is_viewport=False):
             instances.append(MeshInstance(
                 key, None,
                 visible_camera=bool(getattr(obj, "visible_camera", True)),
-                casts_shadow=bool(getattr(obj, "visible_shadow", True))))
+                casts_shadow=bool(getattr(obj, "visible_shadow", True)),
+                terminator_offset=compat.terminator_geometry_offset(obj)))
             # A copy: the instance (and a Matrix that wraps it) is reused by the iterator.
             matrices.append(instance.matrix_world.copy())
             if key not in mesh_sources:

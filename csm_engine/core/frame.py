@@ -54,6 +54,7 @@ class MeshInstance:
     world_from_object: np.ndarray
     visible_camera: bool = True     # Object > Visibility > Ray Visibility > Camera
     casts_shadow: bool = True       # Object > Visibility > Ray Visibility > Shadow
+    terminator_offset: float = 0.1  # Object > Shading > Shadow Terminator > Geometry Offset
 
 
 @dataclass

@@ -461,16 +461,18 @@ class Pipeline:
             view_depth = self._texture("view_depth", (width, height), 'R32F')
             depth = self.gbuffer_depth_texture(width, height)
             emission = self._texture("emission", (width, height), 'RGBA16F')
+            facet = self._texture("facet", (width, height), 'RGBA16F')
             # Emission and metallic have a target only in frames that draw some: without
             # it each fragment writes a sixth less (llvmpipe: ~15 % of the G-buffer), and
             # the lighting pass reads an emission texture kept at zero.
             if lists.writes_emission:
                 gbuffer_fb = self._framebuffer("gbuffer", depth=depth,
-                                               colors=(albedo, normal, view_depth, emission))
+                                               colors=(albedo, normal, view_depth, facet,
+                                                       emission))
                 self._zeroed_emission = None
             else:
                 gbuffer_fb = self._framebuffer("gbuffer_no_emission", depth=depth,
-                                               colors=(albedo, normal, view_depth))
+                                               colors=(albedo, normal, view_depth, facet))
                 if self._zeroed_emission is not emission:
                     emission_fb = self._framebuffer("emission_only", colors=(emission,))
                     with emission_fb.bind():
@@ -483,7 +485,7 @@ class Pipeline:
             # A G-buffer that would come out the same as the one the targets hold is not
             # drawn again (F12 after a shadow or light setting changed; an unchanged
             # re-render), nor is its AO (see _ambient_occlusion).
-            targets = (albedo, normal, view_depth, emission, depth)
+            targets = (albedo, normal, view_depth, emission, depth, facet)
             contents = self._gbuffer_contents(snap, cache, items, order, world_from_objects,
                                               frame_data, lists.writes_emission)
             held = self._textures.get("gbuffer_contents")
@@ -493,7 +495,7 @@ class Pipeline:
                 GBUFFERS["kept"] += 1
                 self.gbuffer_kept = True
                 t = self._sync(gbuffer_fb, "gbuffer", t)
-                return t, (albedo, normal, view_depth, emission, gbuffer_fb)
+                return t, (albedo, normal, view_depth, emission, gbuffer_fb, facet)
             if not self.skip_gpu_calls:
                 # Forget what the targets held while they are redrawn (if drawing raises,
                 # the next frame draws again), and what was computed from them.
@@ -521,6 +523,8 @@ class Pipeline:
                     for index in rows.tolist():
                         draws = items[index][slot]
                         gbuffer.uniform_float("world_from_object", world_from_objects_gl[index])
+                        gbuffer.uniform_float("terminator_offset",
+                                              snap.instances[index].terminator_offset)
                         for batch, material in draws:
                             wanted = ('FRONT' if mirrored[index] else 'BACK') \
                                 if material.backface_culling else 'NONE'
@@ -540,7 +544,7 @@ class Pipeline:
             if contents is not None and not self.skip_gpu_calls:
                 self._textures["gbuffer_contents"] = (targets, contents)
             t = self._sync(gbuffer_fb, "gbuffer", t)
-            return t, (albedo, normal, view_depth, emission, gbuffer_fb)
+            return t, (albedo, normal, view_depth, emission, gbuffer_fb, facet)
 
         t = time.perf_counter()
         if fit_to_visible:
@@ -561,7 +565,7 @@ class Pipeline:
         else:
             t = shadow_pass(t)
             t, gbuffer = gbuffer_pass(t)
-        albedo, normal, view_depth, emission, gbuffer_fb = gbuffer
+        albedo, normal, view_depth, emission, gbuffer_fb, facet = gbuffer
 
         # 2b. Ambient occlusion: skipped, with no texture allocated, when it is off.
         ambient_occlusion = self._ambient_occlusion(snap, frame_ubo, frame_data, view_depth,
@@ -602,6 +606,7 @@ class Pipeline:
             lighting.uniform_sampler("ambient_occlusion",
                                      white if ambient_occlusion is None else ambient_occlusion)
             lighting.uniform_sampler("gbuffer_emission", emission)
+            lighting.uniform_sampler("gbuffer_facet", facet)
             self._gpu_call(self._fullscreen_batch().draw, lighting)
             gpu.state.depth_test_set('NONE')
             if overlays and plan.frozen_camera is not None:
@@ -813,7 +818,8 @@ class Pipeline:
                           writes_emission):
         """What a G-buffer drawn now would hold, as a value to compare with the one the
         targets hold: the programs, camera and sample, which instances in which order at
-        which matrices, each one's geometry (``GPUMesh.serial``) and material inputs. None
+        which matrices, each one's geometry (``GPUMesh.serial``), material inputs and
+        Shadow Terminator Geometry Offset. None
         when a draw reads an image (its pixels may have changed in place). In the viewport
         the camera is looked at first, so a redraw of a moving view pays for little else
         (its record holds only the camera, which the next redraw of that view completes)."""
@@ -839,7 +845,10 @@ class Pipeline:
                     return None
                 known = per_entry[id(entry)] = (mesh.serial if mesh is not None else 0, keys)
             draws.append(known)
-        return (camera, order.tobytes(), world_from_objects[order].tobytes(), tuple(draws))
+        # The facet target carries each object's Shadow Terminator Geometry Offset.
+        offsets = tuple(instances[index].terminator_offset for index in order.tolist())
+        return (camera, order.tobytes(), world_from_objects[order].tobytes(), tuple(draws),
+                offsets)
 
     def _gpu_call(self, call, *args, **kwargs):
         """Every draw and clear of a frame goes through here, so that the benchmark can

@@ -3,6 +3,8 @@
  * out_albedo   = base colour rgb, specular strength
  * out_normal   = world normal xyz (normal-mapped where the material has a map), shininess
  * out_depth    = view depth along the camera's forward axis (0 = background)
+ * out_facet    = the triangle's own normal xyz (on the shading normal's side), the
+ *                object's Shadow Terminator Geometry Offset
  * out_emission = emitted radiance rgb (W/m^2/sr, EEVEE's units), metallic */
 
 #include "alpha_hash.glsl"
@@ -92,4 +94,10 @@ void main()
   out_normal = vec4(n, shininess);
   out_depth = max(view_depth, 1e-6);
   out_emission = vec4(emission, clamp(metallic, 0.0, 1.0));
+  /* The triangle's own plane: every pixel of a quad (helpers too) interpolates this
+   * triangle, so the derivatives are exactly its edges. Turned to the side the shading
+   * normal is on. */
+  vec3 facet = cross(dFdx(world_position), dFdy(world_position));
+  facet = dot(facet, facet) > 1e-30 ? normalize(facet) : n;
+  out_facet = vec4(dot(facet, n) < 0.0 ? -facet : facet, terminator_offset);
 }

@@ -14,6 +14,7 @@ void main()
   world_tangent = vec4(mat3(world_from_object) * tan.xyz, tan.w);
 #endif
   tex_coord = uv;
+  world_position = world.xyz;
   /* Linear in the world position, so interpolation gives the exact per-pixel value; the
    * lighting pass rebuilds the world position from it (4 bytes a pixel instead of 16). */
   view_depth = dot(world.xyz - frame.camera_position, frame.camera_forward);
