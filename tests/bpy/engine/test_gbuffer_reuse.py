@@ -147,6 +147,26 @@ def test_edits_that_reach_the_gbuffer_draw_it_again(empty_scene, edit):
     assert np.array_equal(after, _render_everything(scene)), edit
 
 
+def test_a_shadow_terminator_offset_edit_draws_the_gbuffer_again(empty_scene):
+    """The G-buffer's facet target carries each object's Shadow Terminator Geometry
+    Offset, so changing it on a smooth low-poly sphere (stepped terminator at 0, lit band
+    above) draws the G-buffer again and shows, as a render that drew everything does."""
+    scene, _cube, _sun = _scene(empty_scene)
+    bpy.ops.mesh.primitive_uv_sphere_add(segments=8, ring_count=4, radius=1.2,
+                                         location=(-2.5, -2.5, 1.3))
+    bpy.ops.object.shade_smooth()
+    sphere = bpy.context.object
+    owner = sphere if hasattr(sphere, "shadow_terminator_geometry_offset") else sphere.cycles
+    owner.shadow_terminator_geometry_offset = 0.1
+    before, _ = _render(scene)
+    _render(scene)
+    owner.shadow_terminator_geometry_offset = 0.0
+    after, kept = _render(scene)
+    assert not kept
+    assert np.abs(after - before).max() > 0.02
+    assert np.array_equal(after, _render_everything(scene))
+
+
 def test_ao_is_not_kept_across_a_redrawn_gbuffer(empty_scene):
     """AO off while the G-buffer changes, then on again with the G-buffer kept: the AO is
     made from the G-buffer now, not the one it was last made from."""
