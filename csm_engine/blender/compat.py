@@ -18,6 +18,8 @@ import sys
 import bpy
 import numpy as np
 
+from ..core.frame import DEFAULT_TERMINATOR_OFFSET
+
 # Principled BSDF specular: "Specular IOR Level" in 4.0+, "Specular" before.
 PRINCIPLED_SPECULAR_INPUTS = ("Specular IOR Level", "Specular")
 # Principled BSDF emission colour: "Emission Color" in 4.0+, "Emission" before.
@@ -57,14 +59,10 @@ def material_backface_culling_shadow(material):
     return bool(getattr(material, "use_backface_culling_shadow", False))
 
 
-# Blender's default Shadow Terminator Geometry Offset (Object > Shading), also what an
-# object has when the Cycles add-on that holds the setting before 5.0 is not enabled.
-DEFAULT_TERMINATOR_OFFSET = 0.1
-
-
 def terminator_geometry_offset(obj):
     """The object's Shadow Terminator Geometry Offset: ``Object`` property in 5.0+, the
-    Cycles add-on's ``object.cycles`` property in 3.x/4.x."""
+    Cycles add-on's ``object.cycles`` property in 3.x/4.x (Blender's default when that
+    add-on is not enabled)."""
     value = getattr(obj, "shadow_terminator_geometry_offset", None)
     if value is None:
         value = getattr(getattr(obj, "cycles", None), "shadow_terminator_geometry_offset",

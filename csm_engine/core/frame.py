@@ -48,13 +48,18 @@ class SpotLight:
     source_radius: float = 0.0  # Blender's Radius (scene units): soft shadows' penumbra
 
 
+# Blender's default Shadow Terminator Geometry Offset (Object > Shading).
+DEFAULT_TERMINATOR_OFFSET = 0.1
+
+
 @dataclass
 class MeshInstance:
     key: str                    # mesh-cache key (the original object's name)
     world_from_object: np.ndarray
     visible_camera: bool = True     # Object > Visibility > Ray Visibility > Camera
     casts_shadow: bool = True       # Object > Visibility > Ray Visibility > Shadow
-    terminator_offset: float = 0.1  # Object > Shading > Shadow Terminator > Geometry Offset
+    # Object > Shading > Shadow Terminator > Geometry Offset
+    terminator_offset: float = DEFAULT_TERMINATOR_OFFSET
 
 
 @dataclass

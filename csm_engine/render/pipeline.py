@@ -9,7 +9,8 @@ Passes per frame:
 1. shadow: one depth-only tile per cascade (and per shadowed spot or point light face) in
    one atlas, and beside it a one-byte partial-caster mask that the alpha-hashed casters
    mark (PCF Sharpen leaves their partial shadows alone);
-2. G-buffer: albedo+specular, normal+shininess, view depth (0 = background), emission+
+2. G-buffer: albedo+specular, normal+shininess, view depth (0 = background), the
+   triangle's own normal+the object's Shadow Terminator Geometry Offset, emission+
    metallic, depth (materials: one uniform block each, core/material_layout.py); world
    positions are rebuilt from view depth in the lighting pass (``world_positions`` here);
    then, when on, ambient occlusion: a half-resolution horizon search and a depth-aware
@@ -482,12 +483,15 @@ class Pipeline:
             order = np.asarray(front_to_back(snap, bounds_lo_hi), dtype=np.int64)
             order = order[np.fromiter((i.visible_camera for i in snap.instances), dtype=bool,
                                       count=len(snap.instances))[order]]
+            terminator_offsets = np.fromiter((i.terminator_offset for i in snap.instances),
+                                             dtype=np.float64, count=len(snap.instances))
             # A G-buffer that would come out the same as the one the targets hold is not
             # drawn again (F12 after a shadow or light setting changed; an unchanged
             # re-render), nor is its AO (see _ambient_occlusion).
             targets = (albedo, normal, view_depth, emission, depth, facet)
             contents = self._gbuffer_contents(snap, cache, items, order, world_from_objects,
-                                              frame_data, lists.writes_emission)
+                                              terminator_offsets, frame_data,
+                                              lists.writes_emission)
             held = self._textures.get("gbuffer_contents")
             self.gbuffer_kept = False
             if not self.skip_gpu_calls and contents is not None and held is not None and \
@@ -520,11 +524,14 @@ class Pipeline:
                     gbuffer.bind()
                     gbuffer.uniform_block("frame", frame_ubo)
                     bound = None
+                    offset = None
                     for index in rows.tolist():
                         draws = items[index][slot]
                         gbuffer.uniform_float("world_from_object", world_from_objects_gl[index])
-                        gbuffer.uniform_float("terminator_offset",
-                                              snap.instances[index].terminator_offset)
+                        # Most objects share Blender's default: set only when it changes.
+                        if terminator_offsets[index] != offset:
+                            offset = terminator_offsets[index]
+                            gbuffer.uniform_float("terminator_offset", float(offset))
                         for batch, material in draws:
                             wanted = ('FRONT' if mirrored[index] else 'BACK') \
                                 if material.backface_culling else 'NONE'
@@ -814,8 +821,8 @@ class Pipeline:
         self._held_signatures = kept
         return signatures
 
-    def _gbuffer_contents(self, snap, cache, items, order, world_from_objects, frame_data,
-                          writes_emission):
+    def _gbuffer_contents(self, snap, cache, items, order, world_from_objects,
+                          terminator_offsets, frame_data, writes_emission):
         """What a G-buffer drawn now would hold, as a value to compare with the one the
         targets hold: the programs, camera and sample, which instances in which order at
         which matrices, each one's geometry (``GPUMesh.serial``), material inputs and
@@ -846,9 +853,8 @@ class Pipeline:
                 known = per_entry[id(entry)] = (mesh.serial if mesh is not None else 0, keys)
             draws.append(known)
         # The facet target carries each object's Shadow Terminator Geometry Offset.
-        offsets = tuple(instances[index].terminator_offset for index in order.tolist())
         return (camera, order.tobytes(), world_from_objects[order].tobytes(), tuple(draws),
-                offsets)
+                terminator_offsets[order].tobytes())
 
     def _gpu_call(self, call, *args, **kwargs):
         """Every draw and clear of a frame goes through here, so that the benchmark can

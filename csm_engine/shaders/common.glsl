@@ -42,10 +42,16 @@ float shadow_window_depth(float linear, ShadowTileData tile)
  * receiver's own surface has under the tapped texel's centre differs from its depth at
  * `receiver` by depth_per_texel . (centre - receiver); comparing against that instead of
  * one depth for every tap keeps a flat lit surface lit under any filter width. */
+/* The tile's texel under atlas-tile position `tap`, kept inside the tile. */
+vec2 tile_texel(float last_texel, vec2 tap)
+{
+  return clamp(floor(tap), vec2(0.0), vec2(last_texel));
+}
+
 float shadow_tap(vec2 origin, float last_texel, vec2 tap, vec2 receiver, float compare_window,
                  vec2 depth_per_texel)
 {
-  vec2 texel = clamp(floor(tap), vec2(0.0), vec2(last_texel));
+  vec2 texel = tile_texel(last_texel, tap);
   float compare = compare_window + dot(depth_per_texel, texel + 0.5 - receiver);
   return texelFetch(shadow_atlas, ivec2(texel) + ivec2(origin), 0).r < compare ? 0.0 : 1.0;
 }
@@ -53,8 +59,7 @@ float shadow_tap(vec2 origin, float last_texel, vec2 tap, vec2 receiver, float c
 /* The atlas's partial-caster mask (1: under an alpha-hashed caster) at a texel. */
 float partial_caster_at(vec2 origin, float last_texel, vec2 tap)
 {
-  vec2 texel = clamp(floor(tap), vec2(0.0), vec2(last_texel));
-  return texelFetch(shadow_partial, ivec2(texel) + ivec2(origin), 0).r;
+  return texelFetch(shadow_partial, ivec2(tile_texel(last_texel, tap)) + ivec2(origin), 0).r;
 }
 
 /* Receiver-plane slope bound, in texels of depth per texel across (a plane the light
@@ -177,7 +182,7 @@ float soft_shadow(ShadowTileData tile, float light_size, vec2 texel, float compa
   float blockers = 0.0;
   for (int i = 0; i < BLOCKER_SAMPLES; i++) {
     vec2 tap = texel + search * vogel_disk(i, BLOCKER_SAMPLES, rotation);
-    vec2 cell = clamp(floor(tap), vec2(0.0), vec2(last_texel));
+    vec2 cell = tile_texel(last_texel, tap);
     float plane = compare + dot(depth_per_texel, cell + 0.5 - texel);
     float stored = texelFetch(shadow_atlas, ivec2(cell) + ivec2(origin), 0).r;
     if (stored < plane) {
