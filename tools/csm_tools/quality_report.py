@@ -3,7 +3,8 @@
 Owns ``./dev quality-report`` (``python -m csm_tools.quality_report``). For each bundled
 scene (``csm_engine/data/scenes/default.json``, ``shadow_test.json``, ``point_lights.json``),
 opened afresh by ``cli.open_scene``, it renders the Cycles reference once (Cycles does not
-depend on any CSM setting) and then, for each point, renders CSM and compares with
+depend on any CSM setting; also its whole-pixel-lit mask, ``ground_truth.
+cycles_whole_pixel_lit``) and then, for each point, renders CSM and compares with
 ``ground_truth.compare_engines``:
 
 - a sweep of one setting at a time around the defaults: ``depth_bias``, ``slope_bias``,
@@ -216,16 +217,19 @@ def _cell(result):
 
 
 def _lit_cell(result):
-    """Partial shadow on fully lit % / flat lit ground at >= 0.999 ("-": no flat ground)."""
+    """Partial shadow on fully lit % / flat lit ground at >= 0.999, centre lit / whole
+    pixel lit ("-": no such ground)."""
     flat = result.get("flat_ground_full_fraction")
+    whole = result.get("flat_ground_whole_pixel_full_fraction")
     return (f"{result['partial_on_lit_percent']:.2f} / "
-            + ("-" if flat is None else f"{flat:.4f}"))
+            + ("-" if flat is None else f"{flat:.4f}") + " / "
+            + ("-" if whole is None else f"{whole:.4f}"))
 
 
 def _lit_table(first_column, rows, scenes):
     """The fully lit pixels' table: ``rows`` is [(label, {scene: point})]."""
     lines = ["Fully lit pixels (**partial shadow on fully lit % / flat lit ground at >= "
-             "0.999**):", "",
+             "0.999, centre lit / whole pixel lit**):", "",
              f"| {first_column} | " + " | ".join(scenes) + " |",
              "|---|" + "---|" * len(scenes)]
     for label, by_scene in rows:
@@ -245,8 +249,10 @@ def build_markdown(report, points, sweeps, scenes, defaults, worst, acne_scene, 
         "pixels' figures, which see the faint shadow a filter or a bias leaves on lit "
         "ground (stripes, a ring around a caster's foot): of the pixels Cycles shows fully "
         "lit, the share CSM shows below 0.999, and of the fully lit flat ground (normal "
-        "within 10 degrees of up), the fraction CSM shows at >= 0.999 (the target of "
-        "0.999, see soft-shadows.md).",
+        f"within {ground_truth.FLAT_GROUND_DEGREES:g} degree of up), the fraction CSM "
+        "shows at >= 0.999 (the target of 0.999, see soft-shadows.md): on the pixels "
+        "whose centre Cycles shows lit, then on those whose whole area it shows lit (no "
+        "shadow edge crosses the pixel).",
         "",
     ]
     acne = [p for p in points if p["group"] == "acne"]
@@ -402,6 +408,7 @@ def run(argv, prog=PROG):
                            "add-on", EXIT_RENDER)
         t0 = time.monotonic()
         reference = ground_truth.cycles_visibility(scene, width, height)
+        whole_lit = ground_truth.cycles_whole_pixel_lit(scene, width, height)
         print(f"[quality] {scene_name}: Cycles reference at {width}x{height} in "
               f"{time.monotonic() - t0:.1f} s", flush=True)
         cache = {}
@@ -417,7 +424,8 @@ def run(argv, prog=PROG):
                     for k, v in point["settings"].items():
                         setattr(csm, k, v)
                     result, classes = ground_truth.compare_engines(
-                        ground_truth.csm_visibility(scene, width, height), reference)
+                        ground_truth.csm_visibility(scene, width, height), reference,
+                        whole_lit=whole_lit)
                 finally:
                     for k, v in saved.items():
                         setattr(csm, k, v)

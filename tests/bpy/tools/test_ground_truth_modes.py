@@ -68,6 +68,23 @@ def test_flat_ground_short_of_lit_is_split_by_whether_it_touches_a_shadow():
     assert result.flat_ground_away_from_edges_full_fraction == pytest.approx(5.0 / 6.0)
 
 
+def test_flat_ground_whole_pixel_figure_leaves_out_the_pixels_an_edge_crosses():
+    # Row 0: Cycles' centre samples light the first four pixels; a shadow edge crosses the
+    # fourth (lit at its centre, not over its whole area), where a filter reads 0.8. The
+    # second pixel no edge touches reads 0.9: a stripe, which the whole-pixel figure sees.
+    cycles = np.array([[1.0, 1.0, 1.0, 1.0, 0.0]])
+    engine = np.array([[1.0, 0.9, 1.0, 0.8, 0.0]])
+    whole = np.array([[True, True, True, False, False]])
+    lit = np.ones_like(cycles, dtype=bool)
+    result, _ = ground_truth.compare(engine, cycles, lit, lit, flat=lit, whole_lit=whole)
+    assert result.flat_ground_full_fraction == pytest.approx(0.5)
+    assert result.flat_whole_lit_ground_pixels == 3
+    assert result.flat_whole_lit_ground_full_pixels == 2
+    assert result.flat_ground_whole_pixel_full_fraction == pytest.approx(2.0 / 3.0)
+    without, _ = ground_truth.compare(engine, cycles, lit, lit, flat=lit)
+    assert without.flat_ground_whole_pixel_full_fraction is None
+
+
 def test_blurring_a_hard_edge_toward_the_reference_lowers_the_error():
     """The continuous error prefers the right penumbra: a soft reference edge, a hard
     engine edge and one blurred like the reference."""
@@ -272,6 +289,44 @@ def test_fully_lit_flat_ground_is_measured_on_a_plain_plane(empty_scene):
     assert eevee.flat_ground_full_fraction > 0.999
     print(f"flat lit ground at >= 0.999: CSM {csm.flat_ground_full_fraction:.4f}, "
           f"EEVEE {eevee.flat_ground_full_fraction:.4f}")
+
+
+def test_whole_pixel_lit_ground_leaves_out_just_the_pixels_a_shadow_edge_crosses(
+        empty_scene):
+    """A tilted slab's shadow on a plane: Cycles' whole-pixel mask drops some pixels its
+    centre samples call lit, every one of them beside a centre-shadowed pixel (an edge
+    crosses them), and keeps the open ground. On it CSM's flat lit ground is at least as
+    full as on the centre-lit pixels."""
+    scene = empty_scene
+    bpy.ops.mesh.primitive_plane_add(size=200)
+    bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 0.0, 2.0),
+                                    rotation=(0.0, 0.0, math.radians(27)))
+    bpy.context.object.scale = (8.0, 0.5, 3.0)
+    # The sun behind the camera's side: the shadow falls toward the camera, in view.
+    bpy.ops.object.light_add(type='SUN', rotation=(math.radians(-40), 0.0, math.radians(10)))
+    bpy.ops.object.camera_add(location=(0.0, -20.0, 14.0), rotation=(math.radians(55), 0, 0))
+    scene.camera = bpy.context.object
+    width, height = SIZE
+    centre = ground_truth.cycles_visibility(scene, width, height)
+    whole = ground_truth.cycles_whole_pixel_lit(scene, width, height)
+    centre_lit = centre.lit & (centre.vis >= ground_truth.FULLY_LIT)
+    centre_dark = centre.lit & (centre.vis < ground_truth.SHADOWED_BELOW)
+    assert centre_dark.sum() > 1000                      # the slab's shadow is in view
+    # A pixel shadowed at its centre is never whole-lit. (On silhouettes, where part of
+    # the pixel is a face turned from the sun, it can be; compare() takes only pixels
+    # lit at their centre too.)
+    assert not (whole & centre.lit & ~centre_lit).any()
+    crossed = centre_lit & ~whole
+    assert crossed.sum() >= 10
+    assert not (crossed & ~ground_truth._next_to(centre_dark | ~centre.lit)).any()
+    assert whole.sum() > 0.9 * centre_lit.sum()
+    report = ground_truth.measure_report(scene, width, height, eevee=False)
+    csm = report.csm
+    assert 0 < csm.flat_whole_lit_ground_pixels < csm.flat_lit_ground_pixels
+    assert csm.flat_ground_whole_pixel_full_fraction >= csm.flat_ground_full_fraction
+    print(f"crossed by an edge: {int(crossed.sum())} of {int(centre_lit.sum())} centre-lit; "
+          f"flat lit ground at >= 0.999: centre {csm.flat_ground_full_fraction:.4f}, whole "
+          f"pixel {csm.flat_ground_whole_pixel_full_fraction:.4f}")
 
 
 def test_command_rejects_bad_soft_mode_options(capsys):
