@@ -59,15 +59,25 @@ def material_backface_culling_shadow(material):
     return bool(getattr(material, "use_backface_culling_shadow", False))
 
 
+def terminator_offset_owner(obj):
+    """What holds the object's Shadow Terminator Geometry Offset: the ``Object`` in 5.0+,
+    the Cycles add-on's ``object.cycles`` in 3.x/4.x, None when neither has it (Cycles
+    not enabled)."""
+    if hasattr(obj, "shadow_terminator_geometry_offset"):
+        return obj
+    cycles = getattr(obj, "cycles", None)
+    if cycles is not None and hasattr(cycles, "shadow_terminator_geometry_offset"):
+        return cycles
+    return None
+
+
 def terminator_geometry_offset(obj):
-    """The object's Shadow Terminator Geometry Offset: ``Object`` property in 5.0+, the
-    Cycles add-on's ``object.cycles`` property in 3.x/4.x (Blender's default when that
-    add-on is not enabled)."""
-    value = getattr(obj, "shadow_terminator_geometry_offset", None)
-    if value is None:
-        value = getattr(getattr(obj, "cycles", None), "shadow_terminator_geometry_offset",
-                        DEFAULT_TERMINATOR_OFFSET)
-    return float(value)
+    """The object's Shadow Terminator Geometry Offset (``terminator_offset_owner``), or
+    Blender's default when no setting holds it."""
+    owner = terminator_offset_owner(obj)
+    if owner is None:
+        return float(DEFAULT_TERMINATOR_OFFSET)
+    return float(owner.shadow_terminator_geometry_offset)
 
 
 def corner_tangents(mesh, uv_name=""):

@@ -246,6 +246,10 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         if self.cache is None:
             self.cache = mesh_cache.MeshCache()
         self.snapshots.scene_updated(self.cache, depsgraph.updates)
+        # Blender redraws the viewport after an update only when a notifier asks for it;
+        # an ID tagged with no notifier (a script's update_tag(), a driver) would leave
+        # the last frame on screen (measured in 3.4: no draw within 10 s).
+        self.tag_redraw()
 
     def view_draw(self, context, depsgraph):
         import gpu

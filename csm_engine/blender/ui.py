@@ -1,7 +1,10 @@
-"""Panels: the CSM settings in Properties > Render and in the 3D View sidebar ("CSM" tab).
+"""Panels: the CSM settings in Properties > Render and in the 3D View sidebar ("CSM" tab),
+and the per-object setting CSM reads in Properties > Object.
 
 Owns layout only. Both places draw the same groups through ``draw_*`` functions, so a
-setting appears identically wherever the user looks for it. "Light" edits the sun
+setting appears identically wherever the user looks for it. Properties > Object >
+"Shadow Terminator" shows Blender's own Geometry Offset, which Blender shows only for
+Cycles and EEVEE. "Light" edits the sun
 (``Scene.csm_light``, see light_controls.py) and the ambient term; "Scene" holds the
 import/reload/shader-reload/screenshot/first-person commands and the last shader error.
 """
@@ -167,11 +170,50 @@ def _make_panel(space, region, context_name, key, label, draw_fn, category=None)
     return type(attrs["bl_idname"], (bpy.types.Panel,), attrs)
 
 
+# Object types CSM draws as surfaces (their evaluated meshes), so they have a terminator.
+SURFACE_TYPES = {'MESH', 'CURVE', 'SURFACE', 'META', 'FONT'}
+
+
+def draw_shadow_terminator(layout, context):
+    """Blender's per-object Shadow Terminator Geometry Offset, where this Blender keeps it
+    (``compat.terminator_offset_owner``); CSM lifts the shadow lookup of smooth-shaded
+    low-poly surfaces by it, as Cycles does (docs/soft-shadows.md)."""
+    from . import compat
+    obj = context.object
+    owner = compat.terminator_offset_owner(obj)
+    col = layout.column()
+    if owner is None:
+        col.label(text=f"Geometry Offset {compat.DEFAULT_TERMINATOR_OFFSET:g} (Blender's "
+                       f"default): enable the Cycles add-on to change it", icon='INFO')
+    else:
+        col.prop(owner, "shadow_terminator_geometry_offset", text="Geometry Offset")
+
+
+class CSM_PT_object_shadow_terminator(bpy.types.Panel):
+    bl_idname = "CSM_PT_object_shadow_terminator"
+    bl_label = "Shadow Terminator"
+    bl_space_type = 'PROPERTIES'
+    bl_region_type = 'WINDOW'
+    bl_context = "object"
+    bl_options = {'DEFAULT_CLOSED'}
+    COMPAT_ENGINES = {"CSM"}
+
+    @classmethod
+    def poll(cls, context):
+        obj = context.object
+        return context.engine == "CSM" and obj is not None and obj.type in SURFACE_TYPES
+
+    def draw(self, context):
+        self.layout.use_property_split = True
+        draw_shadow_terminator(self.layout, context)
+
+
 classes = tuple(
     [_make_panel('PROPERTIES', 'WINDOW', "render", key, label, fn)
      for key, label, fn in GROUPS] +
     [_make_panel('VIEW_3D', 'UI', None, key, label, fn, category="CSM")
-     for key, label, fn in GROUPS])
+     for key, label, fn in GROUPS] +
+    [CSM_PT_object_shadow_terminator])
 
 
 def register():

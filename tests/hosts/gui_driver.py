@@ -11,6 +11,10 @@ It writes into OUT_DIR:
 - ``viewport.png``: the whole Blender window, top row first;
 - ``render.png``: the F12 render;
 - ``render_no_shadows.png``: the same render with the sun's shadow turned off;
+- ``terminator_0.1.png``, ``terminator_0.png``: the window after a low-poly smooth sphere
+  was added in front of the camera, with its Shadow Terminator Geometry Offset at 0.1 and
+  then edited to 0 (as the UI's edit reaches the engine: the value set and the object
+  tagged in the depsgraph, no redraw asked for by the driver);
 - ``viewport.json``: window size, the camera frame rectangle in window pixels (origin at the
   window's bottom-left, as Blender counts), timings, the number of viewport draws and mesh
   uploads, and ``error`` (None on success).
@@ -40,6 +44,8 @@ CAMERA_ZOOM_OUT = 3.0
 FRAME_MARGIN_PX = 12        # the frame must stay this far inside the viewport region
 WAIT_LIMIT_S = 60.0         # give up (and say why) if the engine never draws
 VIEWPORT_ASPECT = (16, 9)   # camera frame aspect while the viewport is captured
+SPHERE_DISTANCE = 40.0      # scene units in front of the camera (default.json's scale)
+SPHERE_RADIUS = 6.0
 
 sys.dont_write_bytecode = True   # no __pycache__ in the checkout
 if REPO not in sys.path:
@@ -220,6 +226,53 @@ def render_still():
         raise RuntimeError(f"the render without shadows failed: {result.error}")
 
 
+def set_terminator_offset(obj, value):
+    """What an edit of Geometry Offset in Properties > Object > Shadow Terminator does
+    (CSM's panel; Blender 5.0 keeps the value on the ``Object``, 3.x/4.x on the Cycles
+    add-on's ``object.cycles``). NOTE: a property an add-on defines (``object.cycles``)
+    updates nothing when Python sets it (``RNA_property_update_check`` is false for it),
+    while the UI's edit tags its ID in the depsgraph (``rna_property_update``, the
+    PROP_IDPROPERTY branch); ``update_tag`` stands in for that tag, and is also what a
+    script has to call."""
+    from csm_engine.blender import compat
+    compat.terminator_offset_owner(obj).shadow_terminator_geometry_offset = value
+    obj.update_tag()
+
+
+def add_terminator_sphere():
+    """Sun shadows back on, and a 12-segment smooth-shaded sphere in front of the camera:
+    its facets turned from the sun but smooth-shaded toward it are the terminator band."""
+    import bmesh
+    from mathutils import Vector
+    scene = bpy.context.scene
+    for obj in scene.objects:
+        if obj.type == 'LIGHT':
+            obj.data.use_shadow = True
+    camera = scene.camera.matrix_world
+    location = camera.translation + camera.to_3x3() @ Vector((0.0, 0.0, -SPHERE_DISTANCE))
+    mesh = bpy.data.meshes.new("TerminatorSphere")
+    shape = bmesh.new()
+    bmesh.ops.create_uvsphere(shape, u_segments=12, v_segments=6, radius=SPHERE_RADIUS)
+    shape.to_mesh(mesh)
+    shape.free()
+    for polygon in mesh.polygons:
+        polygon.use_smooth = True
+    sphere = bpy.data.objects.new("TerminatorSphere", mesh)
+    sphere.location = location
+    scene.collection.objects.link(sphere)
+    set_terminator_offset(sphere, 0.1)
+    return sphere
+
+
+def screenshot(name):
+    window, area, region = STATE["window"], STATE["area"], STATE["region"]
+    shot = os.path.join(OUT_DIR, name)
+    with bpy.context.temp_override(window=window, area=area, region=region):
+        bpy.ops.screen.screenshot(filepath=shot, check_existing=False)
+    if not os.path.isfile(shot):
+        raise RuntimeError(f"screen.screenshot did not write {shot}")
+
+
 def tick():
     try:
         step = STATE["step"]
@@ -252,9 +305,35 @@ def tick():
                 log(f"screenshot taken after {STATE['draws']} viewport draws")
                 render_still()
                 log("F12 render written")
-                finish(0)
+                STATE["sphere"] = add_terminator_sphere()
+                STATE["draws_at_mark"] = STATE["draws"]
+                STATE["area"].tag_redraw()
+                STATE["step"] = "sphere_draw"
             else:
                 STATE["area"].tag_redraw()
+        elif step == "sphere_draw":
+            if STATE["draws"] - STATE["draws_at_mark"] >= 2:
+                screenshot("terminator_0.1.png")
+                log("screenshot with the sphere's offset at 0.1")
+                # The edit alone must bring a new draw: no tag_redraw from here on.
+                set_terminator_offset(STATE["sphere"], 0.0)
+                STATE["draws_at_mark"] = STATE["draws"]
+                STATE["edited_at"] = time.monotonic()
+                STATE["step"] = "edit_draw"
+            else:
+                STATE["area"].tag_redraw()
+        elif step == "edit_draw":
+            if STATE["draws"] - STATE["draws_at_mark"] >= 1:
+                # The first draw the edit brought, as it was swapped to the window.
+                screenshot("terminator_0.png")
+                REPORT["terminator_edit"] = {
+                    "draws_after_edit": STATE["draws"] - STATE["draws_at_mark"],
+                    "seconds_to_redraw": round(time.monotonic() - STATE["edited_at"], 3)}
+                log("screenshot with the sphere's offset at 0")
+                finish(0)
+            elif time.monotonic() - STATE["edited_at"] > 10.0:
+                raise RuntimeError("the viewport did not draw again within 10 s of an "
+                                   "edit of the sphere's Shadow Terminator Geometry Offset")
         return TICK_S
     except Exception:
         REPORT["error"] = traceback.format_exc()

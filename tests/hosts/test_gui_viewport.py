@@ -276,3 +276,30 @@ def test_comparison_rejects_pictures_that_are_not_the_render(images):
     accepted = {name: difference(crop, image) for name, image in controls.items()
                 if matches(crop, image)}
     assert not accepted, f"the comparison accepted pictures that differ: {accepted}"
+
+
+def test_an_objects_terminator_offset_edit_redraws_the_viewport(viewport_run):
+    """Blender 3.4 keeps the Shadow Terminator Geometry Offset on the Cycles add-on's
+    ``object.cycles``. After the driver adds a 12-segment smooth sphere (offset 0.1) and then
+    edits the offset to 0 as CSM's Object panel does (gui_driver.set_terminator_offset; no
+    redraw asked for), the viewport draws again by itself, and that draw shows the sphere's
+    terminator band self-shadowed: the sphere darker, the rest of the frame unchanged."""
+    edit = viewport_run.report.get("terminator_edit")
+    assert edit and edit["draws_after_edit"] >= 1, viewport_run.report
+    frame = viewport_run.report["camera_frame"]
+    size = tuple(viewport_run.report["render_size"])
+    before, after = (luminance(camera_frame_crop(load_png(viewport_run.path(name)), frame,
+                                                 size))
+                     for name in ("terminator_0.1.png", "terminator_0.png"))
+    darker = before - after > SHADOW_STEP
+    lighter = after - before > SHADOW_STEP
+    height, width = darker.shape
+    rows, cols = np.nonzero(darker)
+    summary = (f"{int(darker.sum())} pixels darker, {int(lighter.sum())} lighter of "
+               f"{width}x{height}; redraw {edit['seconds_to_redraw']} s after the edit")
+    assert darker.sum() > 0.002 * darker.size, "the edit did not show: " + summary
+    assert lighter.sum() < 0.1 * darker.sum(), summary
+    # The sphere sits on the camera's axis: the change is in the middle of the frame.
+    assert abs(cols.mean() / width - 0.5) < 0.2 and abs(rows.mean() / height - 0.5) < 0.2, \
+        summary
+    print(summary)

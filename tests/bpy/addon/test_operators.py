@@ -364,3 +364,26 @@ def test_compiler_logs_of_blender_3_4_4_2_and_5_name_the_glsl_file():
     assert "lighting_frag.glsl:171(17): error" in shaders._map_log(driver_42, ids)
     assert ":common.glsl:17:17: Error" in shaders._map_log(blender_5, ids)
     assert shaders._map_log("error at 0.12345 in 99999", ids) == "error at 0.12345 in 99999"
+
+
+def test_object_panel_shows_the_shadow_terminator_offset_csm_reads(empty_scene):
+    """Blender shows the Geometry Offset only for Cycles and EEVEE; CSM reads it, so its
+    Object panel shows it, on the setting this Blender keeps (the Object in 5.0, the Cycles
+    add-on's object.cycles before), and an edit there is what the render reads."""
+    from csm_engine.blender import compat
+    bpy.ops.mesh.primitive_uv_sphere_add()
+    sphere = bpy.context.object
+    panel = bpy.types.CSM_PT_object_shadow_terminator
+    assert panel.poll(bpy.context)
+    layout = _Layout()
+    ui.draw_shadow_terminator(layout, bpy.context)
+    assert layout.props == ["shadow_terminator_geometry_offset"]
+    owner = compat.terminator_offset_owner(sphere)
+    assert owner == (sphere if bpy.app.version >= (5, 0, 0) else sphere.cycles)
+    owner.shadow_terminator_geometry_offset = 0.35
+    assert compat.terminator_geometry_offset(sphere) == pytest.approx(0.35)
+    bpy.ops.object.light_add(type='SUN')
+    assert not panel.poll(bpy.context)               # a light has no terminator
+    empty_scene.render.engine = 'CYCLES'
+    bpy.context.view_layer.objects.active = sphere
+    assert not panel.poll(bpy.context)               # Cycles' own panel shows it there
