@@ -247,8 +247,9 @@ class CSMRenderEngine(bpy.types.RenderEngine):
             self.cache = mesh_cache.MeshCache()
         self.snapshots.scene_updated(self.cache, depsgraph.updates)
         # Blender redraws the viewport after an update only when a notifier asks for it;
-        # an ID tagged with no notifier (a script's update_tag(), a driver) would leave
-        # the last frame on screen (measured in 3.4: no draw within 10 s).
+        # an ID tagged with no notifier (a script's update_tag(), which Blender asks for
+        # after setting an add-on's property such as object.cycles) left the last frame on
+        # screen (measured in 3.4: no draw within 10 s).
         self.tag_redraw()
 
     def view_draw(self, context, depsgraph):

@@ -231,9 +231,10 @@ def set_terminator_offset(obj, value):
     (CSM's panel; Blender 5.0 keeps the value on the ``Object``, 3.x/4.x on the Cycles
     add-on's ``object.cycles``). NOTE: a property an add-on defines (``object.cycles``)
     updates nothing when Python sets it (``RNA_property_update_check`` is false for it),
-    while the UI's edit tags its ID in the depsgraph (``rna_property_update``, the
-    PROP_IDPROPERTY branch); ``update_tag`` stands in for that tag, and is also what a
-    script has to call."""
+    while the UI's edit tags its ID in the depsgraph and sends NC_WINDOW
+    (``rna_property_update``, the PROP_IDPROPERTY branch). ``update_tag`` stands in for the
+    tag, and is what Blender asks scripts to call (T74000); it sends no notifier, so the
+    engine alone must bring the redraw: the harder case of the two."""
     from csm_engine.blender import compat
     compat.terminator_offset_owner(obj).shadow_terminator_geometry_offset = value
     obj.update_tag()
