@@ -7,8 +7,9 @@ monkey on a floor) it renders
 
 - Cycles' Ambient Occlusion pass (``view_layer.use_pass_ambient_occlusion``) with the
   World's AO distance (``world.light_settings.distance``) set to the scene's distance, on
-  the CPU, with a box pixel filter of width 0.01 (one ray through each pixel centre, where
-  CSM's rasterizer samples), read from an uncompressed multilayer OpenEXR;
+  the CPU, with a Gaussian pixel filter of width 0.01 (every ray through the pixel centre,
+  where CSM's rasterizer samples; Cycles' box filter is one pixel wide whatever its width),
+  read from an uncompressed multilayer OpenEXR;
 - CSM's AO through its "Ambient occlusion" debug view (strength 1, the same distance),
 
 and compares them on the pixels CSM covers (eroded by one pixel, so silhouettes, where a
@@ -233,7 +234,10 @@ def cycles_ao(scene, distance, samples, folder):
     cycles = scene.cycles
     for name, value in (("device", 'CPU'), ("samples", samples),
                         ("use_adaptive_sampling", False), ("use_denoising", False),
-                        ("max_bounces", 0), ("pixel_filter_type", 'BOX'),
+                        ("max_bounces", 0),
+                        # Pixel centres: Cycles' box is one pixel wide whatever its width
+                        # (ground_truth._setup_cycles).
+                        ("pixel_filter_type", 'GAUSSIAN'),
                         ("filter_width", 0.01), ("seed", 0)):
         _set_if_present(cycles, name, value)
     scene.render.use_compositing = False

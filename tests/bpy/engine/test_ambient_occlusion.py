@@ -208,7 +208,7 @@ def test_error_against_cycles_on_a_small_scene(empty_scene, tmp_path):
     cycles.device, cycles.samples, cycles.max_bounces = 'CPU', 256, 0
     cycles.use_denoising = False
     cycles.use_adaptive_sampling = False
-    cycles.pixel_filter_type, cycles.filter_width = 'BOX', 0.01
+    cycles.pixel_filter_type, cycles.filter_width = 'GAUSSIAN', 0.01  # box: 1 px always
     reference = _render_to_exr(scene, tmp_path)[..., 0]
     inner = covered.copy()
     for axis in (0, 1):

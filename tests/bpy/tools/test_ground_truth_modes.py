@@ -291,13 +291,9 @@ def test_fully_lit_flat_ground_is_measured_on_a_plain_plane(empty_scene):
           f"EEVEE {eevee.flat_ground_full_fraction:.4f}")
 
 
-def test_whole_pixel_lit_ground_leaves_out_just_the_pixels_a_shadow_edge_crosses(
-        empty_scene):
-    """A tilted slab's shadow on a plane: Cycles' whole-pixel mask drops some pixels its
-    centre samples call lit, every one of them beside a centre-shadowed pixel (an edge
-    crosses them), and keeps the open ground. On it CSM's flat lit ground is at least as
-    full as on the centre-lit pixels."""
-    scene = empty_scene
+def _slab_shadow_scene(scene):
+    """A tilted slab on a plane, its shadow thrown toward the camera: long edges at every
+    angle to the pixel grid."""
     bpy.ops.mesh.primitive_plane_add(size=200)
     bpy.ops.mesh.primitive_cube_add(size=1.0, location=(0.0, 0.0, 2.0),
                                     rotation=(0.0, 0.0, math.radians(27)))
@@ -306,6 +302,37 @@ def test_whole_pixel_lit_ground_leaves_out_just_the_pixels_a_shadow_edge_crosses
     bpy.ops.object.light_add(type='SUN', rotation=(math.radians(-40), 0.0, math.radians(10)))
     bpy.ops.object.camera_add(location=(0.0, -20.0, 14.0), rotation=(math.radians(55), 0, 0))
     scene.camera = bpy.context.object
+    return scene
+
+
+def test_cycles_reference_samples_pixel_centres(empty_scene):
+    """The reference takes its rays through each pixel's centre, where CSM and EEVEE shade:
+    with many samples and a hard sun, a shadow edge stays a step. Cycles' box filter would
+    not do (it is one pixel wide whatever its width, which the tool used until the eleventh
+    session): through it, the pixels an edge crosses come out partly shadowed."""
+    scene = _slab_shadow_scene(empty_scene)
+    width, height = SIZE
+    centre = ground_truth.cycles_visibility(scene, width, height, samples=16)
+    box = ground_truth._reference_visibility(
+        scene, width, height, 0.0, "CYCLES",
+        lambda changes: ground_truth._setup_cycles_whole_pixel(scene, changes, 16), 16)
+
+    def partial(result):
+        return int((result.lit & (result.vis > 0.05) & (result.vis < 0.95)).sum())
+
+    assert partial(box) > 50, partial(box)
+    assert partial(centre) <= 0.1 * partial(box), (partial(centre), partial(box))
+    print(f"partly shadowed pixels, 16 samples: centre {partial(centre)}, whole pixel "
+          f"{partial(box)}")
+
+
+def test_whole_pixel_lit_ground_leaves_out_just_the_pixels_a_shadow_edge_crosses(
+        empty_scene):
+    """A tilted slab's shadow on a plane: Cycles' whole-pixel mask drops some pixels its
+    centre samples call lit, every one of them beside a centre-shadowed pixel (an edge
+    crosses them), and keeps the open ground. On it CSM's flat lit ground is at least as
+    full as on the centre-lit pixels."""
+    scene = _slab_shadow_scene(empty_scene)
     width, height = SIZE
     centre = ground_truth.cycles_visibility(scene, width, height)
     whole = ground_truth.cycles_whole_pixel_lit(scene, width, height)
