@@ -178,17 +178,31 @@ float soft_shadow(ShadowTileData tile, float light_size, vec2 texel, float compa
                         tile, light_size, receiver_linear, nearest, texel_world_xy)),
                     vec2(1.0));
   float rotation = sample_rotation();
+  /* Only blockers inside the cone the light subtends from this point count: one there hides
+   * part of the light; one outside it, however near, hides none (a PCSS that averaged every
+   * blocker in the search put penumbrae on fully lit ground beside them and widened them,
+   * docs/ground-truth.md, "Eleventh session"). A texel is inside when its nearest edge is
+   * within the cone's radius at its height above the point (sun: tan(half angle) x height;
+   * a sphere light of radius R at distance D: R x height / (D - height) in the receiver's
+   * texels). The 3x3 texels around the point come first: a small light's cone is narrower
+   * than the search's spacing. No blocker in the cone: fully lit. */
   float blocker_window = 0.0;
   float blockers = 0.0;
-  for (int i = 0; i < BLOCKER_SAMPLES; i++) {
-    vec2 tap = texel + search * vogel_disk(i, BLOCKER_SAMPLES, rotation);
+  for (int i = 0; i < 9 + BLOCKER_SAMPLES; i++) {
+    vec2 tap = i < 9 ? floor(texel) + vec2(float(i % 3) - 1.0, float(i / 3) - 1.0) + 0.5 :
+                       texel + search * vogel_disk(i - 9, BLOCKER_SAMPLES, rotation);
     vec2 cell = tile_texel(last_texel, tap);
     float plane = compare + dot(depth_per_texel, cell + 0.5 - texel);
     float stored = texelFetch(shadow_atlas, ivec2(cell) + ivec2(origin), 0).r;
-    if (stored < plane) {
-      blocker_window += stored;
-      blockers += 1.0;
-    }
+    vec2 away = max(abs(cell + 0.5 - texel) - 0.5, vec2(0.0)) * texel_world_xy;
+    float height = receiver_linear - shadow_linear_depth(stored, tile);
+    float cone_radius = tile.is_perspective != 0 ?
+                            light_size * height / max(receiver_linear - height, 1e-4) :
+                            light_size * height;
+    /* Masked, not branched: llvmpipe runs both sides of an `if` anyway. */
+    float in_cone = (stored < plane && length(away) <= cone_radius) ? 1.0 : 0.0;
+    blocker_window += in_cone * stored;
+    blockers += in_cone;
   }
   if (blockers == 0.0) {
     return 1.0;

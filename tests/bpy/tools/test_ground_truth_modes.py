@@ -219,8 +219,9 @@ def test_the_sun_angle_reaches_every_engine_and_is_restored():
     assert hard.mode == "hard" and wide.mode == "soft"
     assert hard.csm.penumbra_width_ratio is None           # Cycles' hard edge: no penumbra
     assert hard.csm.cycles_penumbra_pixels < 20
-    # A 10 degree sun behind 6-unit pillars: penumbrae Cycles and EEVEE both draw.
-    assert wide.csm.cycles_penumbra_pixels > 100
+    # A 10 degree sun behind 6-unit pillars: penumbrae Cycles and EEVEE both draw (70
+    # pixels through pixel centres; 100+ while the reference sampled whole pixels).
+    assert wide.csm.cycles_penumbra_pixels > 40
     assert wide.eevee.penumbra_pixels > 0.2 * wide.csm.cycles_penumbra_pixels
     assert wide.cycles_samples == SOFT_SAMPLES and wide.eevee_samples == 4
     assert 0.0 < wide.cycles_noise < 0.05
