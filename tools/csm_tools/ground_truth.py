@@ -84,7 +84,7 @@ TRANSPARENT_BOUNCES = 64        # alpha-cut layers a Cycles shadow ray may pass 
 SOFT_CYCLES_SAMPLES = 128
 SOFT_EEVEE_SAMPLES = 16         # EEVEE's soft shadows converge over its render samples
 # NOTE: samples over each pixel's area for the whole-pixel-lit mask, measured
-# (docs/ground-truth.md, "Whole-pixel flat lit ground"): point_lights' flat lit ground at
+# (docs/ground-truth.md, Method 7, "whole pixel lit"): point_lights' flat lit ground at
 # >= 0.999 reads 0.99940 with 16 and 0.99951 with 64. A sliver of shadow under 1/16 of a
 # pixel can slip between 16 stratified samples; such a pixel counts as whole-lit, so fewer
 # samples can only make the figure stricter on the engines.
