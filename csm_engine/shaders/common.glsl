@@ -127,19 +127,28 @@ vec2 vogel_disk(int i, int n, float rotation)
   return r * vec2(cos(a), sin(a));
 }
 
-/* Four texels around `tap`, bilinearly weighted: 1 lit, 0 shadowed. */
+/* Four texels around `tap`, bilinearly weighted: 1 lit, 0 shadowed. A texel shadows when
+ * it is in front of the receiver's plane under it and also in front of `ceiling`: the soft
+ * filter passes the receiver point's own depth plus one texel of the plane's slope, as
+ * nothing behind a point hides the light from it, and the plane continued past a concave
+ * corner (a sunlit wall down to its foot) runs behind the ground there, which then read
+ * as a blocker over half of a wide filter disk (docs/soft-shadows.md, twelfth session).
+ * The slack keeps a caster that touches the receiver found right at the contact; within
+ * a texel of the point the plane itself is always below the ceiling. */
 float shadow_tap_bilinear(vec2 origin, float last_texel, vec2 tap, vec2 receiver,
-                          float compare, vec2 depth_per_texel)
+                          float compare, vec2 depth_per_texel, float ceiling)
 {
   vec2 t = tap - 0.5;
   vec2 base = floor(t);
   vec2 f = t - base;
-  vec2 c = base + 0.5;
-  float a = shadow_tap(origin, last_texel, c, receiver, compare, depth_per_texel);
-  float b = shadow_tap(origin, last_texel, c + vec2(1.0, 0.0), receiver, compare, depth_per_texel);
-  float d = shadow_tap(origin, last_texel, c + vec2(0.0, 1.0), receiver, compare, depth_per_texel);
-  float e = shadow_tap(origin, last_texel, c + vec2(1.0, 1.0), receiver, compare, depth_per_texel);
-  return mix(mix(a, b, f.x), mix(d, e, f.x), f.y);
+  vec4 lit;
+  for (int k = 0; k < 4; k++) {
+    vec2 cell = tile_texel(last_texel, base + vec2(float(k % 2), float(k / 2)) + 0.5);
+    float plane = compare + dot(depth_per_texel, cell + 0.5 - receiver);
+    float stored = texelFetch(shadow_atlas, ivec2(cell) + ivec2(origin), 0).r;
+    lit[k] = stored < min(plane, ceiling) ? 0.0 : 1.0;
+  }
+  return mix(mix(lit.x, lit.y, f.x), mix(lit.z, lit.w, f.x), f.y);
 }
 
 /* Penumbra radius, in texels along the tile's x and y, for a receiver at `receiver_linear`
@@ -164,30 +173,6 @@ vec2 limit_soft_radius(vec2 radius)
   float widest = max(radius.x, radius.y);
   return widest > SOFT_RADIUS_LIMIT_TEXELS ? radius * (SOFT_RADIUS_LIMIT_TEXELS / widest) :
                                              radius;
-}
-
-/* As shadow_tap_bilinear, but a texel shadows only when it is nearer the light than the
- * receiver point itself, not just than the receiver plane under it: no real blocker lies
- * behind the point it hides the light from, and the plane continued past a concave corner
- * (a sunlit wall down to its foot) runs behind the ground there, which then read as a
- * blocker over half of a wide filter disk. */
-float soft_tap(vec2 origin, float last_texel, vec2 tap, vec2 receiver, float compare,
-               vec2 depth_per_texel)
-{
-  vec2 t = tap - 0.5;
-  vec2 base = floor(t);
-  vec2 f = t - base;
-  /* A texel's own slope of slack, as the bilinear taps around the point itself have: a
-   * caster touching the receiver is still found right at the contact. */
-  float ceiling = compare + abs(depth_per_texel.x) + abs(depth_per_texel.y);
-  vec4 lit;
-  for (int k = 0; k < 4; k++) {
-    vec2 cell = tile_texel(last_texel, base + vec2(float(k % 2), float(k / 2)) + 0.5);
-    float plane = compare + dot(depth_per_texel, cell + 0.5 - receiver);
-    float stored = texelFetch(shadow_atlas, ivec2(cell) + ivec2(origin), 0).r;
-    lit[k] = stored < min(plane, ceiling) ? 0.0 : 1.0;
-  }
-  return mix(mix(lit.x, lit.y, f.x), mix(lit.z, lit.w, f.x), f.y);
 }
 
 float soft_shadow(ShadowTileData tile, float light_size, vec2 texel, float compare,
@@ -242,16 +227,19 @@ float soft_shadow(ShadowTileData tile, float light_size, vec2 texel, float compa
    * profile: the part of a disk an edge covers). The plain bilinear ramp made 1-degree
    * penumbrae 24-54 % wider than Cycles' (docs/soft-shadows.md, twelfth session). */
   float widest = max(radius.x, radius.y);
+  float ceiling = compare + abs(depth_per_texel.x) + abs(depth_per_texel.y);
   radius = max(radius - 0.25, vec2(0.0));
   if (max(radius.x, radius.y) < 0.5) {
-    float one = shadow_tap_bilinear(origin, last_texel, texel, texel, compare, depth_per_texel);
+    float one = shadow_tap_bilinear(origin, last_texel, texel, texel, compare, depth_per_texel,
+                                    ceiling);
     float sharpen = clamp(0.5 / max(widest, 1e-3), 1.0, 3.0);
     return clamp((one - 0.5) * sharpen + 0.5, 0.0, 1.0);
   }
   float lit = 0.0;
   for (int i = 0; i < SOFT_FILTER_SAMPLES; i++) {
     vec2 tap = texel + radius * vogel_disk(i, SOFT_FILTER_SAMPLES, rotation);
-    lit += soft_tap(origin, last_texel, tap, texel, compare, depth_per_texel);
+    lit += shadow_tap_bilinear(origin, last_texel, tap, texel, compare, depth_per_texel,
+                               ceiling);
   }
   return lit / float(SOFT_FILTER_SAMPLES);
 }
