@@ -27,6 +27,15 @@ SPLIT_SCHEMES_LABELS = {
     'MANUAL': ("Manual", "Split positions typed in as fractions of the shadow distance"),
 }
 
+CASCADE_SELECTIONS_LABELS = {
+    'MAP': ("Shadow Map", "Each pixel reads the finest cascade whose shadow map holds it, "
+                          "wherever its depth slice ends: a fitted cascade's map also covers "
+                          "receivers beyond its split, so more of the view gets the sharpest "
+                          "map (DirectX's Map Selection)"),
+    'DEPTH': ("View Depth", "Each pixel reads the cascade whose slice of view depth holds it: "
+                            "the cascades show as bands at the splits (interval selection)"),
+}
+
 PCF_PATTERNS_LABELS = {
     'GRID': ("Grid", "Square kernel of (2r+1)x(2r+1) taps; radius 0 is a single tap"),
     'CROSS5': ("5-tap cross", "Centre and 4 neighbours one texel away, scaled by the radius"),
@@ -81,6 +90,7 @@ SPLIT_SCHEMES = _enum_items(frame_layout.SPLIT_SCHEMES, SPLIT_SCHEMES_LABELS)
 PCF_PATTERNS = _enum_items(frame_layout.PCF_PATTERNS, PCF_PATTERNS_LABELS)
 DEBUG_VIEWS = _enum_items(frame_layout.DEBUG_VIEWS, DEBUG_VIEWS_LABELS)
 SHADOW_FILTERS = _enum_items(frame_layout.SHADOW_FILTERS, SHADOW_FILTERS_LABELS)
+CASCADE_SELECTIONS = _enum_items(frame_layout.CASCADE_SELECTIONS, CASCADE_SELECTIONS_LABELS)
 # 'PER_LIGHT' is not a falloff of its own: snapshot.py picks one of the others per light.
 LIGHT_FALLOFFS = (('PER_LIGHT', "Per light", "Lights imported from a course scene file (they "
                    "carry the custom property csm_radius) fall off linearly to their radius; "
@@ -94,6 +104,7 @@ ENUM_ITEMS = {
     "debug_view": DEBUG_VIEWS,
     "light_falloff": LIGHT_FALLOFFS,
     "shadow_filter": SHADOW_FILTERS,
+    "cascade_selection": CASCADE_SELECTIONS,
 }
 
 
@@ -124,8 +135,16 @@ class CSMSettings(bpy.types.PropertyGroup):
                     "ranges (sharper far away)")
     split_lambda: FloatProperty(
         name="Lambda", default=0.5, min=0.0, max=1.0, update=_redraw,
-        description="Hybrid split weight, 0 to 1: 0 = uniform, 1 = logarithmic. Higher moves "
-                    "the splits toward the camera: sharper near shadows, softer far ones")
+        description="Hybrid split weight over clip start .. shadow distance (Fit to Visible "
+                    "Depth off), 0 to 1: 0 = uniform, 1 = logarithmic. Higher moves the "
+                    "splits toward the camera: sharper near shadows, softer far ones")
+    fitted_split_lambda: FloatProperty(
+        name="Lambda (Fitted)", default=0.9, min=0.0, max=1.0, update=_redraw,
+        description="Hybrid split weight over the depth the camera sees (Fit to Visible "
+                    "Depth on), 0 to 1: 0 = uniform, 1 = logarithmic. That range starts at the nearest visible surface, not at the "
+                    "clip start, so the logarithmic split no longer spends the first cascade "
+                    "on empty foreground, and a weight near 1 (sample-distribution shadow "
+                    "maps' logarithmic split) gives the sharpest near shadows")
     manual_splits: FloatVectorProperty(
         name="Manual Splits", size=3, default=(0.1, 0.3, 0.6), min=0.0, max=1.0,
         update=_redraw,
@@ -142,6 +161,10 @@ class CSMSettings(bpy.types.PropertyGroup):
                     "farthest depth the camera actually sees (measured on the GPU each frame) "
                     "instead of clip start to shadow distance, so no cascade is spent on "
                     "empty depth. Sharper shadows wherever the view starts far away")
+    cascade_selection: EnumProperty(
+        name="Cascade Selection", items=CASCADE_SELECTIONS, default='MAP', update=_redraw,
+        description="How a pixel picks its cascade: the finest shadow map that holds it, or "
+                    "the slice of view depth it lies in")
     resolution: IntProperty(
         name="Resolution", default=2048, min=64, max=8192, subtype='PIXEL', update=_redraw,
         description="Shadow-map size of the first cascade in texels; "
@@ -192,7 +215,9 @@ class CSMSettings(bpy.types.PropertyGroup):
         name="Blend Band", default=2.0, min=0.0, soft_max=100.0, unit='LENGTH', update=_redraw,
         description="Width (scene units of view depth) of the cross-fade before each split. "
                     "Inside it both cascades are sampled and mixed, so no seam shows. "
-                    "0 = hard switch; capped at half of the nearer cascade's depth range")
+                    "0 = hard switch; capped at half of the nearer cascade's depth range. "
+                    "With Cascade Selection: Shadow Map the cross-fade is at each map's "
+                    "edge instead (0 still switches hard)")
 
     # --- Bias (texels: scaled per cascade by its world texel size) --------------------
     depth_bias: FloatProperty(
@@ -200,7 +225,7 @@ class CSMSettings(bpy.types.PropertyGroup):
         description="Depth offset in shadow texels, the same for all cascades (scaled to each "
                     "cascade's texel size). Too low: acne. Too high: peter-panning")
     slope_bias: FloatProperty(
-        name="Slope Bias", default=1.0, min=0.0, soft_max=10.0, update=_redraw,
+        name="Slope Bias", default=0.5, min=0.0, soft_max=10.0, update=_redraw,
         description="Extra depth offset in texels that grows with the surface slope to the "
                     "sun. Too low: acne on surfaces the sun grazes. Too high: shadows detach")
     normal_offset: FloatProperty(

@@ -17,7 +17,8 @@ def draw_cascades(layout, csm):
     col.prop(csm, "cascade_count")
     col.prop(csm, "split_scheme")
     if csm.split_scheme == 'HYBRID':
-        col.prop(csm, "split_lambda")
+        # The weight of the range the splits divide: the visible depth when fitted.
+        col.prop(csm, "fitted_split_lambda" if csm.fit_to_visible else "split_lambda")
     if csm.split_scheme == 'MANUAL':
         row = col.row(align=True)
         for i in range(max(csm.cascade_count - 1, 0)):
@@ -32,6 +33,7 @@ def draw_cascades(layout, csm):
     sub = row.row()
     sub.active = csm.fade_out
     sub.prop(csm, "fade_fraction", text="")
+    col.prop(csm, "cascade_selection")
 
 
 def draw_filtering(layout, csm):

@@ -959,7 +959,7 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
     if exact:
         return np.array(centre), np.array([max(0.5 * (hi - lo), 1e-9)
                                            for lo, hi in zip(low, high)])
-    half = [_round_up_dyadic(max(0.5 * (hi - lo), 1e-9), bits=4) for lo, hi in zip(low, high)]
+    half = [_round_up_dyadic(max(0.5 * (hi - lo), 1e-9), bits=6) for lo, hi in zip(low, high)]
     if previous is not None:
         old_centre, old_half = (np.asarray(v, dtype=np.float64) for v in previous)
         # The whole previous rectangle, while it holds every receiver and is not much too

@@ -36,16 +36,22 @@ LIGHT_FALLOFFS = ("PHYSICAL", "LINEAR_RADIUS")
 # How shadow edges are filtered: one hard tap, the fixed PCF kernel (radius and pattern
 # settings), or soft shadows whose penumbra follows the light's size (PCSS).
 SHADOW_FILTERS = ("HARD", "PCF", "SOFT")
+# Which cascade a pixel reads: the finest whose shadow map holds it (as the DirectX SDK's
+# Map Selection and MJP's Projection mode), or the one whose view-depth slice holds it
+# (interval selection, the course's bands).
+CASCADE_SELECTIONS = ("MAP", "DEPTH")
 
 DEBUG_VIEW_INDEX = {name: index for index, name in enumerate(DEBUG_VIEWS)}
 PCF_PATTERN_INDEX = {name: index for index, name in enumerate(PCF_PATTERNS)}
 SPLIT_SCHEME_INDEX = {name: index for index, name in enumerate(SPLIT_SCHEMES)}
 LIGHT_FALLOFF_INDEX = {name: index for index, name in enumerate(LIGHT_FALLOFFS)}
 SHADOW_FILTER_INDEX = {name: index for index, name in enumerate(SHADOW_FILTERS)}
+CASCADE_SELECTION_INDEX = {name: index for index, name in enumerate(CASCADE_SELECTIONS)}
 
 # GLSL name prefix of each enum: DEBUG_VIEWS' "SHADOW_MAP" is DEBUG_SHADOW_MAP in GLSL.
 GLSL_ENUMS = (("DEBUG", DEBUG_VIEWS), ("PCF", PCF_PATTERNS), ("SPLIT", SPLIT_SCHEMES),
-              ("FALLOFF", LIGHT_FALLOFFS), ("FILTER", SHADOW_FILTERS))
+              ("FALLOFF", LIGHT_FALLOFFS), ("FILTER", SHADOW_FILTERS),
+              ("SELECT", CASCADE_SELECTIONS))
 
 
 def glsl_defines():
@@ -393,6 +399,7 @@ FRAME_LAYOUT = UniformLayout("FrameData", (
     ("sun_color", "vec3", "sun irradiance on a surface facing it (linear rgb, W/m^2)"),
     ("sun_casts_shadow", "int", "1 if the sun casts shadows (cascade_count > 0)"),
     ("cascade_count", "int", "cascades in use, 0..MAX_CASCADES"),
+    ("cascade_selection", "int", "SELECT_* rule picking a pixel's cascade"),
     ("shadow_distance", "float", "view depth where sun shadows end (scene units)"),
     ("fade_start_depth", "float", "view depth where shadows begin to fade out (scene units)"),
     ("pcf_radius_texels", "float", "PCF kernel radius, a whole number of texels"),

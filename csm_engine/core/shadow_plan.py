@@ -14,9 +14,9 @@ import numpy as np
 
 from . import cascades
 from .frame import spot_cone_cosines
-from .frame_layout import (DEBUG_VIEW_INDEX, FRAME_LAYOUT, LIGHT_FALLOFF_INDEX, MAX_CASCADES,
-                           MAX_POINT_LIGHTS, MAX_POINT_SHADOWS, MAX_SHADOW_TILES,
-                           MAX_SPOT_LIGHTS,
+from .frame_layout import (CASCADE_SELECTION_INDEX, DEBUG_VIEW_INDEX, FRAME_LAYOUT,
+                           LIGHT_FALLOFF_INDEX, MAX_CASCADES, MAX_POINT_LIGHTS,
+                           MAX_POINT_SHADOWS, MAX_SHADOW_TILES, MAX_SPOT_LIGHTS,
                            PCF_PATTERN_INDEX)
 from .matrices import inverse_projection, inverse_rigid, inverse_transpose_3x3
 
@@ -188,8 +188,11 @@ def plan_shadows(snap, bounds, depth_blocks=None):
                     float(depth_blocks[2].min()), float(depth_blocks[3].max()),
                     previous=held[0])
                 if fitted is not None:
+                    # The fitted range has its own hybrid weight (Lambda (Fitted)): its
+                    # near end is a surface, not the clip start (docs/soft-shadows.md).
                     arguments.update(depth_range=fitted, depth_blocks=depth_blocks,
-                                     previous_squares=held[1])
+                                     previous_squares=held[1],
+                                     lam=float(s.fitted_split_lambda))
             try:
                 result = cascades.compute_cascades(
                     camera.world_from_view, camera.projection, -snap.sun.to_light,
@@ -498,6 +501,7 @@ def _snapshot_fields(snap):
         has_sun=int(sun is not None),
         sun_color=sun.color if sun is not None else (0.0, 0.0, 0.0),
         pcf_radius_texels=s.pcf_radius,
+        cascade_selection=CASCADE_SELECTION_INDEX[s.cascade_selection],
         pcf_pattern=PCF_PATTERN_INDEX[s.pcf_pattern],
         pcf_sharpen=s.pcf_sharpen,
         depth_bias_texels=s.depth_bias,

@@ -384,6 +384,49 @@ int sun_cascade(float view_depth, out float next_weight)
   return i;
 }
 
+/* Width (texels) of the cross-fade inside a finer cascade's map edge under map selection. */
+const float MAP_BLEND_TEXELS = 48.0;
+
+/* Map selection (SELECT_MAP): the first cascade whose shadow map holds p with `reach`
+ * texels to spare for the filter, whatever slice of view depth p is in, and within
+ * MAP_BLEND_TEXELS of that map's edge the next cascade that holds p mixed in (`second`,
+ * weight `second_weight`). A cascade fitted to its receivers renders every caster over
+ * its whole rectangle, which reaches past its slice's far split, so points there get its
+ * finer texels too (docs/soft-shadows.md, "Cascade selection"). When no map holds p with
+ * room: `cascade`, the depth slice's own, unmixed. */
+int sun_cascade_by_map(vec3 p, int cascade, float reach, out int second,
+                       out float second_weight)
+{
+  int first = -1;
+  second = -1;
+  second_weight = 0.0;
+  for (int i = 0; i < MAX_CASCADES; i++) {
+    if (i >= frame.cascade_count) {
+      break;
+    }
+    ShadowTileData tile = frame.shadow_tiles[i];
+    vec3 s = (tile.shadow_from_world * vec4(p, 1.0)).xyz; /* orthographic: w is 1 */
+    float inside = min(min(s.x, s.y), min(1.0 - s.x, 1.0 - s.y)) * tile.resolution - reach;
+    bool holds = inside > 0.0 && s.z < 1.0;
+    if (holds && first >= 0) {
+      second = i;
+      break;
+    }
+    if (holds) {
+      first = i;
+      float band = frame.cascades[i].blend_band > 0.0 ? MAP_BLEND_TEXELS : 0.0;
+      second_weight = inside < band ? 1.0 - inside / band : 0.0;
+      if (second_weight == 0.0) {
+        break;
+      }
+    }
+  }
+  if (second < 0) {
+    second_weight = 0.0;
+  }
+  return first >= 0 ? first : cascade;
+}
+
 /* Shadow visibility v faded out towards the Shadow Distance. */
 float sun_shadow_fade(float vis, float view_depth)
 {

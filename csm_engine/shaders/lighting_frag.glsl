@@ -169,6 +169,15 @@ void main()
   float sun_n_dot_l = dot(n, sun_l);
   float next_weight;
   int sun_tile = sun_cascade(view_depth, next_weight);
+  int second_tile = sun_tile + 1;
+  if (frame.cascade_selection == SELECT_MAP && frame.has_sun != 0 && sun_tile >= 0) {
+#if SHADOW_FILTER == FILTER_SOFT
+    float filter_reach = 2.0 + SOFT_RADIUS_LIMIT_TEXELS;
+#else
+    float filter_reach = 2.0 + frame.pcf_radius_texels + frame.normal_offset_texels;
+#endif
+    sun_tile = sun_cascade_by_map(p, sun_tile, filter_reach, second_tile, next_weight);
+  }
   float cascade = sun_shadowed ? float(sun_tile) : -1.0;
   /* Facing away from the sun: in its own shadow, whatever the map says (and no taps to
    * pay for). */
@@ -197,7 +206,7 @@ void main()
     shadow_n_dot_sun = sun_n_dot_l;
   }
   for (int k = 0; k < sun_lookups; k++) {
-    ShadowTileData tile = frame.shadow_tiles[sun_tile + k];
+    ShadowTileData tile = frame.shadow_tiles[k == 0 ? sun_tile : second_tile];
     /* Sun cascades are orthographic: said here as a constant, the compiler drops the
      * perspective code from the lookup (llvmpipe would run it for every pixel). */
     tile.is_perspective = 0;
@@ -206,7 +215,7 @@ void main()
     sun_vis = k == 0 ? vis : mix(sun_vis, vis, next_weight);
   }
   if (sun_lookups > 0) {
-    cascade += sun_lookups == 2 ? next_weight : 0.0;
+    cascade += sun_lookups == 2 ? next_weight * float(second_tile - sun_tile) : 0.0;
     sun_vis = sun_shadow_fade(sun_vis, view_depth);
   }
   if (frame.has_sun != 0) {
@@ -293,7 +302,7 @@ void main()
     color = vec3(sun_vis);
   }
   else if (debug_view == DEBUG_TEXEL_DENSITY) {
-    int c = cascade_index(view_depth);
+    int c = sun_tile;
     if (c < 0) {
       color = vec3(0.5);
     }

@@ -242,7 +242,8 @@ def _snapshot_and_plan():
     settings = SimpleNamespace(fade_out=True, fade_fraction=0.25, pcf_radius=2, pcf_sharpen=2.5,
                                pcf_pattern="CROSS5", depth_bias=0.5, slope_bias=1.5,
                                normal_offset=0.75, debug_view="TEXEL_DENSITY",
-                               debug_shadow_map=3, debug_inset=True)
+                               debug_shadow_map=3, debug_inset=True,
+                               cascade_selection="DEPTH")
     spot = SpotLight(position=np.array([4.0, 5.0, 6.0]), direction=np.array([0.0, 0.0, -1.0]),
                      color=np.array([7.0, 8.0, 9.0]), radius=20.0, spot_size=1.0,
                      spot_blend=0.2, casts_shadow=True, world_from_light=np.eye(4),
@@ -278,6 +279,7 @@ def test_pack_frame_fills_the_frame_block_by_name():
             frame["normal_offset_texels"]) == (0.5, 1.5, 0.75)
     assert frame["point_light_count"] == 1 and frame["spot_light_count"] == 2
     assert (frame["debug_view"], frame["debug_shadow_map"], frame["debug_inset"]) == (4, 3, 1)
+    assert frame["cascade_selection"] == 1                      # DEPTH
     assert [c["far_depth"] for c in frame["cascades"]] == [10.0, 40.0, np.float32(1e30),
                                                            np.float32(1e30)]
     assert [c["near_depth"] for c in frame["cascades"]][:2] == [np.float32(0.1), 10.0]

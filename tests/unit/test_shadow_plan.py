@@ -13,12 +13,13 @@ from csm_engine.core.frame import FrameSnapshot, SpotLight, Sun
 from csm_engine.core.frame_layout import FRAME_LAYOUT
 
 SETTINGS = dict(
-    cascade_count=3, split_scheme="HYBRID", split_lambda=0.5, manual_splits=(0.1, 0.3, 0.6),
+    cascade_count=3, split_scheme="HYBRID", split_lambda=0.5, fitted_split_lambda=0.9,
+    manual_splits=(0.1, 0.3, 0.6),
     shadow_distance=0.0, resolution=2048, equal_resolution=False, stabilize=True,
     fade_out=True, fade_fraction=0.1, pcf_radius=1, pcf_pattern="GRID", pcf_sharpen=3.0, depth_bias=1.0,
     slope_bias=1.0, normal_offset=0.5, blend_band=0.1, occluder_margin_auto=True,
     occluder_margin=0.0, freeze_cascades=False, cull_front_faces=False, debug_view="NONE",
-    debug_shadow_map=0, debug_inset=False, ambient_strength=1.0)
+    debug_shadow_map=0, debug_inset=False, ambient_strength=1.0, cascade_selection="MAP")
 
 
 def _snapshot(**overrides):
@@ -122,3 +123,28 @@ def test_a_frame_packed_from_the_gbuffer_plan_repacks_to_the_same_bytes():
     # and back: a block with more tiles repacked from a plan with fewer leaves no rows
     full = shadow_plan.pack_frame(snap, plan)
     assert shadow_plan.pack_frame(snap, first_plan, like=full).tobytes() == first.tobytes()
+
+
+def test_the_fitted_range_is_split_with_its_own_lambda():
+    """Lambda weighs clip start .. shadow distance; Lambda (Fitted) the depth the G-buffer
+    shows (Fit to Visible Depth), whose near end is a surface: each moves only its own
+    splits, and both follow the hybrid formula over their range."""
+    pairs = np.empty((9, 16, 2))
+    pairs[..., 0], pairs[..., 1] = 20.0, 100.0                   # what the view shows
+    blocks = shadow_plan.depth_blocks_from_reduction(pairs, 16, 320, 180)
+
+    def splits(**settings):
+        return shadow_plan.plan_shadows(_snapshot(**settings), BOUNDS, blocks).splits
+
+    fitted = splits(fit_to_visible=True, fitted_split_lambda=1.0, split_lambda=0.0)
+    near, far = fitted[0], fitted[-1]
+    assert near <= 20.0 < 100.0 <= far < 120.0
+    # Logarithmic over the fitted range, whatever Lambda says.
+    assert fitted[1] == pytest.approx(near * (far / near) ** (1 / 3), rel=1e-6)
+    assert np.allclose(fitted, splits(fit_to_visible=True, fitted_split_lambda=1.0,
+                                      split_lambda=1.0))
+    uniform = splits(fit_to_visible=True, fitted_split_lambda=0.0)
+    assert uniform[1] == pytest.approx(near + (far - near) / 3, rel=1e-6)
+    # Without the fit, Lambda over clip start .. far clip, and Lambda (Fitted) is not read.
+    plain = splits(fit_to_visible=False, split_lambda=0.0, fitted_split_lambda=1.0)
+    assert plain[0] == pytest.approx(0.1) and plain[1] == pytest.approx(0.1 + 119.9 / 3)

@@ -8,8 +8,8 @@ cycles_whole_pixel_lit``) and then, for each point, renders CSM and compares wit
 ``ground_truth.compare_engines``:
 
 - a sweep of one setting at a time around the defaults: ``depth_bias``, ``slope_bias``,
-  ``normal_offset``, ``pcf_radius``, ``pcf_sharpen``, ``split_lambda``, ``resolution``,
-  ``stabilize``, ``shadow_filter``, ``fit_to_visible``;
+  ``normal_offset``, ``pcf_radius``, ``pcf_sharpen``, ``fitted_split_lambda``,
+  ``resolution``, ``stabilize``, ``shadow_filter``, ``fit_to_visible``;
 - the acne experiment: no bias and no culling, front-face culling only, constant bias
   only, slope-scaled bias only, normal offset only, the defaults.
 
@@ -57,7 +57,8 @@ SWEEPS = (
     # Sharpen leaves the mismatch alone (a pixel stays on its side of 0.5); what it moves
     # is the faint shadow the filter spills onto lit ground, the "fully lit" tables.
     ("pcf_sharpen", (1.0, 2.0, 3.0, 6.0, 10.0, 16.0)),
-    ("split_lambda", (0.0, 0.25, 0.5, 0.75, 0.9, 1.0)),
+    # Fit to Visible Depth is on by default: its own weight moves the splits.
+    ("fitted_split_lambda", (0.0, 0.25, 0.5, 0.75, 0.9, 1.0)),
     ("resolution", (512, 1024, 2048, 4096)),
     ("stabilize", (False, True)),
     ("shadow_filter", ("HARD", "PCF", "SOFT")),
@@ -394,7 +395,10 @@ def run(argv, prog=PROG):
     ensure_registered()
     rna = bpy.context.scene.csm.bl_rna.properties
     names = {s for s, _ in SWEEPS} | set(NO_BIAS)
-    defaults = {n: rna[n].default for n in names}
+    # RNA keeps float defaults in single precision (0.9 reads 0.8999999761581421): to 6
+    # digits, so a swept 0.9 is found as the default.
+    defaults = {n: (float(f"{rna[n].default:.6g}") if isinstance(rna[n].default, float)
+                    else rna[n].default) for n in names}
     points = plan_points(scenes, sweeps, acne_names, defaults)
     scene_dir = os.path.dirname(paths.default_scene_path())
 

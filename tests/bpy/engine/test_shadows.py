@@ -121,6 +121,7 @@ def long_ground(empty_scene):
     scene.csm.debug_view = 'CASCADES'
     scene.csm.split_lambda = 0.75      # splits at ~43 and ~150 m: both well on screen
     scene.csm.fit_to_visible = False   # the splits over clip start .. far, as written above
+    scene.csm.cascade_selection = 'DEPTH'   # the course's bands: a cascade per depth slice
     return scene
 
 
@@ -139,6 +140,42 @@ def test_cascade_colours_in_depth_order(long_ground):
         assert len(pixels) > 100
         mean = pixels.mean(axis=0)
         assert mean[channel] > 1.5 * np.delete(mean, channel).max(), (index, mean)
+
+
+def test_map_selection_gives_ground_past_a_split_the_finer_map(long_ground):
+    """Cascade Selection = Shadow Map: a cascade's map reaches past its slice's far split
+    (a stabilized map is a square around the slice's sphere), and ground there reads that
+    finer map: cascades still rise with distance, every one starts later than its split,
+    and the shadows stay where the ray cast puts them."""
+    scene = long_ground
+    for x in (-14, -8, 8, 14):                    # pillars past the first split, off the middle column
+        for y in (35, 50, 70, 95):
+            add_box((x, y, 4), (0.8, 0.8, 4))
+    by_depth = render_result(scene, 640, 480)
+    scene.csm.cascade_selection = 'MAP'
+    by_map = render_result(scene, 640, 480)
+    splits = by_map.plan.splits
+    covered = by_map.images["aux"][..., 3] > 0.5
+    depth = by_map.images["aux"][..., 2]
+    for result in (by_depth, by_map):
+        column = [result.images["aux"][r, 320, 1] for r in range(479, -1, -1) if covered[r, 320]]
+        assert np.all(np.diff(column) >= -1e-6), "cascade index must not fall with depth"
+    cascade_depth = np.rint(by_depth.images["aux"][..., 1])
+    cascade_map = by_map.images["aux"][..., 1]
+    finest_past_split = covered & (depth > splits[1] * 1.1) & (cascade_map == 0.0)
+    assert not np.any(covered & (depth > splits[1] * 1.1) & (cascade_depth == 0.0))
+    assert finest_past_split.sum() > 1000, "the first map also serves ground past its split"
+    assert np.all(cascade_map[covered] <= cascade_depth[covered] + 1e-6), "never coarser"
+    # Shadows as the ray cast says, with either selection.
+    to_light = (-Vector((0.2, 0.4, -1.0))).normalized()
+    bvh = world_bvh(scene)
+    for result in (by_depth, by_map):
+        rows, cols, points, normals = sun_facing_points(result.images, to_light)
+        expected = ray_cast_shadowed(bvh, points, normals, to_light)
+        assert expected.sum() > 60, "the pillars' shadows are on screen"
+        shadowed = result.images["aux"][rows, cols, 0] < 0.5
+        found, false = np.mean(shadowed[expected]), np.mean(shadowed[~expected])
+        assert found > 0.9 and false < 0.002, (found, false)
 
 
 def test_blend_band_removes_the_step_at_a_split(long_ground):
@@ -222,7 +259,8 @@ def test_stabilized_shadows_hold_still_while_the_camera_moves_less_than_a_texel(
     camera.data.clip_end = 100.0
     width, height = 400, 400
     pixel = camera.data.ortho_scale / width        # 0.1 scene units
-    scene.csm.resolution = 1024                    # texels of at least 0.12 units
+    scene.csm.resolution = 400     # texels of about 0.13 units in the first cascade,
+    #                                which holds the ground here (Shadow Map selection)
     # The whole frustum's fit: the texel size depends only on the camera's slices.
     scene.csm.fit_to_visible = False
 
