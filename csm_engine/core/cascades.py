@@ -918,7 +918,7 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
     ``blocks``: (ndc_low (N, 2), ndc_high (N, 2), nearest (N,), farthest (N,)): screen
     blocks and the view-depth range of what each shows (the G-buffer reduced on the GPU).
     Each block's part of the slice is a small frustum piece; its 8 corners bound it.
-    NOTE: each half width is rounded up to 1/8 of its leading power of two, and the
+    NOTE: each half width is rounded up to 1/32 of its leading power of two, and the
     ``previous`` rectangle (centre, half widths) is kept while the receivers still fit in
     it and it is less than 1/``shrink_below`` of what they need: small camera moves then
     leave the cascade where it was, and the texel size changes rarely, by whole steps.

@@ -170,6 +170,9 @@ void main()
   float next_weight;
   int sun_tile = sun_cascade(view_depth, next_weight);
   int second_tile = sun_tile + 1;
+  /* Cascade Selection: Shadow Map. A finer map than the slice's own may hold the point
+   * (a fitted map reaches past its split): read the finest that does, with room for the
+   * filter's taps and the normal offset. */
   if (frame.cascade_selection == SELECT_MAP && frame.has_sun != 0 && sun_tile >= 0) {
 #if SHADOW_FILTER == FILTER_SOFT
     float filter_reach = 2.0 + SOFT_RADIUS_LIMIT_TEXELS;
