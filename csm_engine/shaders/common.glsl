@@ -406,8 +406,11 @@ int sun_cascade_by_map(vec3 p, int cascade, float reach, out int second,
     }
     ShadowTileData tile = frame.shadow_tiles[i];
     vec3 s = (tile.shadow_from_world * vec4(p, 1.0)).xyz; /* orthographic: w is 1 */
-    float inside = min(min(s.x, s.y), min(1.0 - s.x, 1.0 - s.y)) * tile.resolution - reach;
-    bool holds = inside > 0.0 && s.z < 1.0;
+    /* Texels to the map's side edges (less the filter's reach), and to its far plane
+     * (the box ends there too: a point beyond it is not in the map). */
+    float inside = min(min(min(s.x, s.y), min(1.0 - s.x, 1.0 - s.y)) * tile.resolution - reach,
+                       (1.0 - s.z) * (tile.light_far - tile.light_near) / tile.texel_world);
+    bool holds = inside > 0.0;
     if (holds && first >= 0) {
       second = i;
       break;

@@ -178,6 +178,27 @@ def test_map_selection_gives_ground_past_a_split_the_finer_map(long_ground):
         assert found > 0.9 and false < 0.002, (found, false)
 
 
+def test_map_selection_fades_between_cascades_at_a_maps_edge(pillar_field):
+    """Shadow Map selection on the course's shadow test: where the first map ends, the next
+    one is mixed in over 48 texels (a band of pixels whose cascade value lies between the
+    two), and with Blend Band 0 the switch is hard (no pixel between cascades)."""
+    scene, _sun = pillar_field
+    assert scene.csm.cascade_selection == 'MAP'
+
+    def mixed(band):
+        scene.csm.blend_band = band
+        aux = render_scene(scene, 480, 270)["aux"]
+        cascade, covered = aux[..., 1][aux[..., 3] > 0.5], aux[..., 3] > 0.5
+        between = np.abs(cascade - np.round(cascade)) > 0.01
+        return np.mean(between), cascade[between], covered
+
+    hard, _, _ = mixed(0.0)
+    soft, values, _ = mixed(2.0)
+    assert hard == 0.0, "Blend Band 0: every pixel reads one cascade"
+    assert soft > 0.01, ("at a map's edge both cascades are mixed", soft)
+    assert values.min() > 0.0 and values.max() < 2.0
+
+
 def test_blend_band_removes_the_step_at_a_split(long_ground):
     scene = long_ground
     column = 160
