@@ -9,7 +9,8 @@ cycles_whole_pixel_lit``) and then, for each point, renders CSM and compares wit
 
 - a sweep of one setting at a time around the defaults: ``depth_bias``, ``slope_bias``,
   ``normal_offset``, ``pcf_radius``, ``pcf_sharpen``, ``fitted_split_lambda``,
-  ``resolution``, ``stabilize``, ``shadow_filter``, ``fit_to_visible``;
+  ``resolution``, ``stabilize``, ``shadow_filter``, ``fit_to_visible``,
+  ``cascade_selection``;
 - the acne experiment: no bias and no culling, front-face culling only, constant bias
   only, slope-scaled bias only, normal offset only, the defaults.
 
@@ -63,6 +64,7 @@ SWEEPS = (
     ("stabilize", (False, True)),
     ("shadow_filter", ("HARD", "PCF", "SOFT")),
     ("fit_to_visible", (False, True)),
+    ("cascade_selection", ("MAP", "DEPTH")),
 )
 QUICK_SWEEPS = (("depth_bias", (1.0, 8.0)), ("pcf_sharpen", (1.0, 16.0)))
 
