@@ -141,10 +141,11 @@ class CSMSettings(bpy.types.PropertyGroup):
     fitted_split_lambda: FloatProperty(
         name="Lambda (Fitted)", default=0.9, min=0.0, max=1.0, update=_redraw,
         description="Hybrid split weight over the depth the camera sees (Fit to Visible "
-                    "Depth on), 0 to 1: 0 = uniform, 1 = logarithmic. That range starts at the nearest visible surface, not at the "
-                    "clip start, so the logarithmic split no longer spends the first cascade "
-                    "on empty foreground, and a weight near 1 (sample-distribution shadow "
-                    "maps' logarithmic split) gives the sharpest near shadows")
+                    "Depth on), 0 to 1: 0 = uniform, 1 = logarithmic. That range starts at "
+                    "the nearest visible surface, not at the clip start, so the logarithmic "
+                    "split no longer spends the first cascade on empty foreground, and a "
+                    "weight near 1 (sample-distribution shadow maps' logarithmic split) "
+                    "gives the sharpest near shadows")
     manual_splits: FloatVectorProperty(
         name="Manual Splits", size=3, default=(0.1, 0.3, 0.6), min=0.0, max=1.0,
         update=_redraw,

@@ -245,6 +245,17 @@ float soft_shadow(ShadowTileData tile, float light_size, vec2 texel, float compa
 }
 #endif
 
+/* How far from a point (texels of its tile) this program's filter may read, with a texel
+ * to spare each side: what a map must hold around the point for its lookup to be whole. */
+float shadow_filter_reach_texels()
+{
+#if SHADOW_FILTER == FILTER_SOFT
+  return 2.0 + SOFT_RADIUS_LIMIT_TEXELS;
+#else
+  return 2.0 + frame.pcf_radius_texels + frame.normal_offset_texels;
+#endif
+}
+
 /* Visibility (1 lit, 0 shadowed) of world point p with normal n from shadow tile `tile`.
  * light_size: the sun's tan(half angle), or a spot light's radius (scene units); used by
  * the soft filter only. */

@@ -174,12 +174,8 @@ void main()
    * (a fitted map reaches past its split): read the finest that does, with room for the
    * filter's taps and the normal offset. */
   if (frame.cascade_selection == SELECT_MAP && frame.has_sun != 0 && sun_tile >= 0) {
-#if SHADOW_FILTER == FILTER_SOFT
-    float filter_reach = 2.0 + SOFT_RADIUS_LIMIT_TEXELS;
-#else
-    float filter_reach = 2.0 + frame.pcf_radius_texels + frame.normal_offset_texels;
-#endif
-    sun_tile = sun_cascade_by_map(p, sun_tile, filter_reach, second_tile, next_weight);
+    sun_tile = sun_cascade_by_map(p, sun_tile, shadow_filter_reach_texels(), second_tile,
+                                  next_weight);
   }
   float cascade = sun_shadowed ? float(sun_tile) : -1.0;
   /* Facing away from the sun: in its own shadow, whatever the map says (and no taps to
