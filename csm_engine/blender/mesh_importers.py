@@ -19,6 +19,7 @@ import numpy as np
 from ..core import mesh_files, scene_format
 from ..core.captured_output import CapturedOutput
 from . import compat
+from .materials import COURSE_SURFACE_TAG
 from .import_transaction import SceneImportError, one_line
 
 
@@ -247,14 +248,11 @@ def import_objects(planned, scene_path):
     return new_objects
 
 
-# The course's glTF files keep specular in the blue and shininess in the green channel of
-# metallicRoughnessTexture (docs/scene-format.md), which Blender's importer wires to
-# Metallic and Roughness; this tag makes ``materials`` read them the course's way
-# (docs/materials.md). Materials made or imported any other way keep Blender's meaning.
-COURSE_SURFACE_TAG = ("csm_surface_convention", "COURSE")
-
-
 def _tag_course_materials(objects):
+    """The course's glTF files keep specular in the blue and shininess in the green channel
+    of metallicRoughnessTexture (docs/scene-format.md), which Blender's importer wires to
+    Metallic and Roughness; the tag makes ``materials`` read them the course's way
+    (docs/materials.md). Materials made or imported any other way keep Blender's meaning."""
     for obj in objects:
         for slot in getattr(obj, "material_slots", ()):
             if slot.material is not None:
