@@ -34,7 +34,7 @@ def material_alpha_mode(material):
 
     NOTE: 4.2+ has no opaque or clip mode: every surface is Dithered (alpha hashed) or
     Blended, and ``blend_method`` reads HASHED or BLEND (setting CLIP gives HASHED); the
-    glTF importer expresses masks with Math nodes instead (mesh_cache finds their cutoff).
+    glTF importer expresses masks with Math nodes instead (materials.py finds their cutoff).
     3.4 .. 4.1: ``blend_method`` OPAQUE ignores alpha, CLIP cuts out at alpha_threshold,
     HASHED and BLEND (drawn hashed here) use it."""
     method = getattr(material, "blend_method", 'OPAQUE')
