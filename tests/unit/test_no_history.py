@@ -39,21 +39,21 @@ _ORDINALS = (
 _ORDINAL = r"(?:" + "|".join(_ORDINALS) + r"|\d+(?:st|nd|rd|th))"
 _WORD = "sess" + "ion"
 
-PATTERNS = {
+PATTERNS = [
     # "the <ordinal> <word>", "<ordinal> <word>'s", also across a comment's line break
-    "session number": re.compile(
-        r"\b" + _ORDINAL + r"(?:[\s*#/-]*\s[\s*#/-]*|-)" + _WORD + r"s?\b", re.IGNORECASE),
+    ("session number", re.compile(
+        r"\b" + _ORDINAL + r"(?:[\s*#/-]*\s[\s*#/-]*|-)" + _WORD + r"s?\b", re.IGNORECASE)),
     # "<word> N", "<word>s N-M", "<word> #N"
-    "session number ": re.compile(r"\b" + _WORD + r"s?\s+#?\d+\b", re.IGNORECASE),
+    ("session number", re.compile(r"\b" + _WORD + r"s?\s+#?\d+\b", re.IGNORECASE)),
     # "issue N", "issues #N", "pull request N", "PR N"
-    "issue number": re.compile(
-        r"\b(?:iss" + r"ues?|pull\s+requests?|PRs?)\s*#?\d+\b", re.IGNORECASE),
+    ("issue number", re.compile(
+        r"\b(?:iss" + r"ues?|pull\s+requests?|PRs?)\s*#?\d+\b", re.IGNORECASE)),
     # a bare "#N" after a space or bracket (a colour is hex and 3, 4, 6 or 8 long; a
     # preprocessor line is "#define")
-    "issue number  ": re.compile(r"(?:^|(?<=[\s(\[,;]))#\d{1,5}\b(?![0-9a-fA-F])"),
+    ("issue number", re.compile(r"(?:^|(?<=[\s(\[,;]))#\d{1,5}\b(?![0-9a-fA-F])")),
     # GitHub links to issues and pull requests
-    "issue link": re.compile(r"/(?:iss" + r"ues|pull)/\d+\b"),
-}
+    ("issue link", re.compile(r"/(?:iss" + r"ues|pull)/\d+\b")),
+]
 
 # A commit hash: 7-40 hex digits with both a letter and a digit, in a context that names a
 # commit: after "commit", "main", "at", "on", "from", "since", "index", "rev" or "sha",
@@ -61,26 +61,22 @@ PATTERNS = {
 # colours ("#a0b1c2") and 64-digit digests do not match.
 _HEX = r"(?<![#\w])(?=[0-9a-f]*[a-f])(?=[0-9a-f]*\d)[0-9a-f]{7,40}(?!\w)"
 _CONTEXT_BEFORE = (
-    r"(?:\b(?:commits?|main|master|HEAD|at|on|from|since|index|rev|revision|sha|hash|"
+    r"(?:\b(?i:commits?|main|master|head|at|on|from|since|index|rev|revision|sha|hash|"
     r"branch|before|after|against|vs\.?)\s+[`(]?|[(`]|\.\.\.?)"
 )
 _CONTEXT_AFTER = r"(?:[)`]|\.\.)"
 HASH_PATTERN = re.compile(
-    r"(?:" + _CONTEXT_BEFORE + r")" + _HEX + r"|" + _HEX + r"(?=" + _CONTEXT_AFTER + r")",
-    re.IGNORECASE,
-)
+    r"(?:" + _CONTEXT_BEFORE + r")" + _HEX + r"|" + _HEX + r"(?=" + _CONTEXT_AFTER + r")")
 
 
 def find_history(text):
     """(1-based line, kind, matched text) for every history reference in ``text``."""
-    hits = []
-    patterns = dict(PATTERNS)
-    patterns["commit hash"] = HASH_PATTERN
-    for kind, pattern in patterns.items():
+    hits = set()
+    for kind, pattern in PATTERNS + [("commit hash", HASH_PATTERN)]:
         for match in pattern.finditer(text):
             line = text.count("\n", 0, match.start()) + 1
-            hits.append((line, kind.strip(), " ".join(match.group(0).split())))
-    return sorted(set(hits))
+            hits.add((line, kind, " ".join(match.group(0).split())))
+    return sorted(hits)
 
 
 def scanned_files():
@@ -141,6 +137,7 @@ def _joined(*parts):
     _joined("commit ", "16ba", "4b3 and e70", "ad76"),
     _joined("index ", "64a9", "a07..419", "2ed0 100644"),
     _joined("`", "b62d", "693`"),
+    _joined("Measured at main ", "758e", "969 on 2026-11-24"),
 ])
 def test_detector_finds_history(text):
     assert find_history(text), text
@@ -159,6 +156,8 @@ def test_detector_finds_history(text):
     "an issue with the 2 cascades",
     "measured 2026-11-24 with ./dev bench",
     "cafe and facade are words (deadbeef is all letters)",
+    "an upper-case constant (ABCDEF12) is not a commit",
+    "seed (20261107) and 4000000000 triangles",
 ])
 def test_detector_leaves_other_text_alone(text):
     assert not find_history(text), find_history(text)
