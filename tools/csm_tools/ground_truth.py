@@ -200,7 +200,7 @@ class Comparison:
     @property
     def flat_ground_whole_pixel_full_fraction(self):
         """Of the flat ground whose whole pixel Cycles shows lit (no shadow edge crosses
-        it), the fraction the engine shows at >= 0.999: the issue's "fully lit flat ground"
+        it), the fraction the engine shows at >= 0.999: the target's "fully lit flat ground"
         without the pixels a shadow edge crosses (None without the whole-pixel reference or
         without such ground)."""
         if self.flat_whole_lit_ground_pixels == 0:
@@ -530,8 +530,8 @@ def _setup_cycles(scene, changes, samples=1):
                         # NOTE: a pixel centre needs a narrow Gaussian: Cycles' box filter
                         # is one pixel wide whatever its width says (default.json, 480x270,
                         # hard sun, 64 samples: 1,986 partly shadowed pixels with a box
-                        # of width 0.01 or 1, 14 with a Gaussian of 0.01), so until the
-                        # eleventh session the references sampled the whole pixel.
+                        # of width 0.01 or 1, 14 with a Gaussian of 0.01): a box would
+                        # make the references sample the whole pixel.
                         ("pixel_filter_type", 'GAUSSIAN'),
                         ("filter_width", 0.01), ("seed", 0), ("use_animated_seed", False),
                         ("sample_clamp_direct", 0.0)):
