@@ -18,8 +18,7 @@ from bpy.props import (BoolProperty, EnumProperty, FloatProperty, FloatVectorPro
 from ..core import settings_model
 from ..core.settings_model import SETTINGS
 
-# Each enum setting's Blender items (identifier, label, tooltip). Blender keeps pointers into
-# the strings of static items, so they are built once and kept here.
+# Each enum setting's items as EnumProperty takes them: (identifier, label, tooltip).
 ENUM_ITEMS = {setting.identifier: tuple((item.identifier, item.label, item.description)
                                         for item in setting.items)
               for setting in SETTINGS if setting.kind == settings_model.ENUM}
