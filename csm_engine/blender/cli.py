@@ -10,6 +10,7 @@ import os
 import re
 import sys
 
+from ..core import settings_model
 from ..core.captured_output import CapturedOutput
 
 EXIT_USAGE = 2
@@ -53,47 +54,47 @@ def parse_resolution(text):
 
 
 def apply_override(csm, text):
-    """Set one CSM property from 'name=value' text with the property's own type checks."""
+    """Set one CSM property from 'name=value' text, checked against the setting's kind,
+    enum items and hard range in the settings model."""
     if "=" not in text:
         raise CLIError(f"--set: expected SETTING=VALUE, got '{text}'")
     name, value = (part.strip() for part in text.split("=", 1))
-    props = {p.identifier: p for p in csm.bl_rna.properties if p.identifier != "rna_type"}
-    prop = props.get(name)
-    if prop is None or name == "name":
-        known = ", ".join(sorted(k for k in props if k != "name"))
+    setting = settings_model.BY_IDENTIFIER.get(name)
+    if setting is None:
+        known = ", ".join(sorted(settings_model.BY_IDENTIFIER))
         raise CLIError(f"--set: unknown setting '{name}'. Settings: {known}")
+    is_vector = setting.kind == settings_model.FLOAT_VECTOR
     try:
-        if prop.type == 'BOOLEAN' and not getattr(prop, "is_array", False):
+        if setting.kind == settings_model.BOOLEAN:
             lowered = value.lower()
             if lowered not in {"1", "0", "true", "false", "on", "off", "yes", "no"}:
                 raise ValueError
             parsed = lowered in {"1", "true", "on", "yes"}
-        elif prop.type == 'ENUM':
-            items = [item.identifier for item in prop.enum_items]
+        elif setting.kind == settings_model.ENUM:
+            items = setting.identifiers
             if value.upper() not in items:
                 raise CLIError(f"--set {name}: '{value}' is not one of {', '.join(items)}")
             parsed = value.upper()
-        elif prop.type in {'INT', 'FLOAT'}:
-            cast = int if prop.type == 'INT' else float
-            if getattr(prop, "is_array", False) and prop.array_length > 1:
+        else:
+            cast = int if setting.kind == settings_model.INT else float
+            if is_vector:
                 parsed = [cast(v) for v in value.split(",")]
-                if len(parsed) != prop.array_length:
+                if len(parsed) != setting.size:
                     raise ValueError
                 values = parsed
             else:
                 parsed = cast(value)
                 values = [parsed]
+            hard_min, hard_max = setting.hard_range
             for v in values:
                 if v != v or v in (float("inf"), float("-inf")):
                     raise ValueError
-                if v < prop.hard_min or v > prop.hard_max:
-                    raise CLIError(f"--set {name}: {v} is outside {prop.hard_min:g}.."
-                                   f"{prop.hard_max:g}")
-        else:
-            raise CLIError(f"--set: setting '{name}' cannot be set from the command line")
+                if v < hard_min or v > hard_max:
+                    raise CLIError(f"--set {name}: {v} is outside {hard_min:g}..{hard_max:g}")
     except ValueError:
-        raise CLIError(f"--set {name}: '{value}' is not a valid {prop.type.lower()}"
-                       + (" list" if getattr(prop, "is_array", False) else ""))
+        kind = "float" if is_vector else setting.kind.lower()
+        raise CLIError(f"--set {name}: '{value}' is not a valid {kind}"
+                       + (" list" if is_vector else ""))
     setattr(csm, name, parsed)
 
 
@@ -138,10 +139,9 @@ def open_scene(scene_path=None, overrides=(), resolution=None):
 
 
 def list_settings(scene):
-    for prop in scene.csm.bl_rna.properties:
-        if prop.identifier not in ("rna_type", "name"):
-            print(f"{prop.identifier} = {getattr(scene.csm, prop.identifier)!r}"
-                  f"  # {prop.description}")
+    for setting in settings_model.SETTINGS:
+        print(f"{setting.identifier} = {getattr(scene.csm, setting.identifier)!r}"
+              f"  # {setting.description}")
 
 
 def screenshot_path(text, scene_path):

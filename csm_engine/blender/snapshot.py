@@ -3,20 +3,20 @@
 Owns the translation from Blender's conventions to the engine's plain data: camera matrices
 (from the scene camera for final renders, from the region for the viewport), lights (sun,
 point, spot) in EEVEE's units (docs/lighting.md), the World colour used as ambient, the CSM
-settings, and the list of mesh instances with their world matrices. After ``take()``
-returns, nothing downstream reads ``bpy`` properties (the evaluated objects in
-``mesh_sources`` are only handed to the mesh cache for extraction).
+settings (a ``settings_model.Settings``), and the list of mesh instances with their world
+matrices. After ``take()`` returns, nothing downstream reads ``bpy`` properties (the
+evaluated objects in ``mesh_sources`` are only handed to the mesh cache for extraction).
 """
-
-from types import SimpleNamespace
 
 import numpy as np
 
 from . import compat
+from ..core import settings_model
 from ..core.camera import CameraView
 from ..core.frame import FrameSnapshot, MeshInstance, PointLight, SpotLight, Sun
 from ..core.frame_layout import MAX_POINT_LIGHTS, MAX_SPOT_LIGHTS
 from ..core.matrices import inverse_rigid
+from ..core.settings_model import SETTINGS, Settings
 
 # Light units are EEVEE's (docs/lighting.md), so a scene keeps its exposure when it switches
 # engine. Sun Strength is irradiance (W/m^2) and the diffuse BRDF is albedo/pi (Lambert), as
@@ -75,22 +75,27 @@ def _significant(value):
 
 
 def settings_snapshot(scene, warnings=None):
-    """The CSM settings as plain values. A value outside its setting's range (possible
-    from Python or a hand-edited file, which bypass the UI's limits) is clamped and named
-    in ``warnings``, so a frame never runs with 99 cascades or a 1-texel map."""
+    """The CSM settings as a ``Settings`` value. A value outside its setting's range
+    (possible from Python or a hand-edited file, which bypass the UI's limits) is clamped
+    to the model's hard limits and named in ``warnings``, so a frame never runs with 99
+    cascades or a 1-texel map; an enum value that is no item falls back to the default."""
     csm = scene.csm
     values = {}
-    for name, kind, valid, default, hard_min, hard_max, is_array in _setting_properties(csm):
+    for setting in SETTINGS:
+        name = setting.identifier
         value = getattr(csm, name)
-        if kind == 'ENUM':
+        if setting.kind == settings_model.ENUM:
+            valid = setting.identifiers
             if value not in valid:
                 if warnings is not None:
                     warnings.append(f"setting {name} = {value!r} is not one of "
-                                    f"{', '.join(valid)}; using {default!r}")
-                value = default
-        elif kind in {'INT', 'FLOAT'}:
-            items = list(value) if is_array else [value]
-            cast = int if kind == 'INT' else _significant
+                                    f"{', '.join(valid)}; using {setting.default!r}")
+                value = setting.default
+        elif setting.is_number:
+            hard_min, hard_max = setting.hard_range
+            is_vector = setting.kind == settings_model.FLOAT_VECTOR
+            items = list(value) if is_vector else [value]
+            cast = int if setting.kind == settings_model.INT else _significant
             fixed = []
             for item in items:
                 clamped = min(max(item, hard_min), hard_max) \
@@ -100,39 +105,11 @@ def settings_snapshot(scene, warnings=None):
                                     f"{hard_min:g}..{hard_max:g}; using "
                                     f"{_significant(clamped):g}")
                 fixed.append(cast(clamped))
-            value = tuple(fixed) if is_array else fixed[0]
-        elif hasattr(value, "__len__") and not isinstance(value, str):
-            value = tuple(value)
+            value = tuple(fixed) if is_vector else fixed[0]
+        else:
+            value = bool(value)
         values[name] = value
-    return SimpleNamespace(**values)
-
-
-# The settings' RNA definitions, read once per registered settings class: (name, type,
-# enum identifiers, default, hard min, hard max, is array) per setting. Reading them from
-# bl_rna at every viewport redraw cost more than the values themselves.
-_SETTING_PROPERTIES = {}
-
-
-def _setting_properties(csm):
-    rna = csm.bl_rna
-    key = (type(csm), rna.as_pointer())
-    table = _SETTING_PROPERTIES.get(key)
-    if table is None:
-        table = []
-        for prop in rna.properties:
-            name = prop.identifier
-            if name in ("rna_type", "name"):
-                continue
-            valid = [item.identifier for item in prop.enum_items] \
-                if prop.type == 'ENUM' else None
-            numeric = prop.type in {'INT', 'FLOAT'}
-            table.append((name, prop.type, valid,
-                          prop.default if prop.type == 'ENUM' else None,
-                          prop.hard_min if numeric else None,
-                          prop.hard_max if numeric else None,
-                          bool(getattr(prop, "is_array", False))))
-        table = _SETTING_PROPERTIES[key] = tuple(table)
-    return table
+    return Settings(**values)
 
 
 def _world_color(world, warnings=None):

@@ -6,11 +6,11 @@ stage reads; nothing here knows about Blender. numpy only.
 
 import math
 from dataclasses import dataclass, field
-from types import SimpleNamespace
 
 import numpy as np
 
 from .camera import CameraView
+from .settings_model import Settings
 
 
 @dataclass
@@ -65,7 +65,7 @@ class MeshInstance:
 @dataclass
 class FrameSnapshot:
     camera: CameraView
-    settings: SimpleNamespace
+    settings: Settings
     sun: Sun = None
     points: list = field(default_factory=list)
     spots: list = field(default_factory=list)

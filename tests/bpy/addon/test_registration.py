@@ -1,5 +1,11 @@
 """Registration as Blender users meet it: the engine, its settings and Blender's panels."""
 import bpy
+import pytest
+
+from csm_engine.blender import settings as blender_settings
+from csm_engine.blender import snapshot, ui
+from csm_engine.core import settings_model
+from csm_engine.core.settings_model import SETTINGS, default_settings
 
 STANDARD_PANELS = ("RENDER_PT_format", "RENDER_PT_output", "RENDER_PT_color_management",
                    "DATA_PT_lens", "DATA_PT_camera", "DATA_PT_EEVEE_light",
@@ -19,6 +25,59 @@ def test_blenders_standard_panels_show_for_csm_and_irrelevant_ones_do_not():
     for name in STANDARD_PANELS:
         assert "CSM" in panels[name].COMPAT_ENGINES, name
     assert "CSM" not in panels["DATA_PT_lightprobe"].COMPAT_ENGINES
+
+
+def _csm_properties():
+    return {prop.identifier: prop for prop in bpy.context.scene.csm.bl_rna.properties
+            if prop.identifier not in ("rna_type", "name")}
+
+
+def test_every_blender_setting_is_the_models_setting():
+    assert set(_csm_properties()) == {setting.identifier for setting in SETTINGS}
+    # Blender lists them in the model's order (the CLI's --list-settings and the
+    # snapshot's warnings follow it).
+    assert list(_csm_properties()) == [setting.identifier for setting in SETTINGS]
+
+
+@pytest.mark.parametrize("setting", SETTINGS, ids=lambda setting: setting.identifier)
+def test_blender_property_matches_the_model(setting):
+    prop = _csm_properties()[setting.identifier]
+    assert prop.name == setting.name
+    assert prop.description == setting.description
+    assert prop.is_animatable
+    kind = setting.kind
+    rna_type = "FLOAT" if kind == settings_model.FLOAT_VECTOR else kind
+    assert prop.type == rna_type
+    if setting.is_number:
+        assert prop.array_length == (setting.size or 0)
+        default = list(prop.default_array) if setting.size else prop.default
+        expected = list(setting.default) if setting.size else setting.default
+        assert default == pytest.approx(expected, rel=1e-7)    # stored as float32
+        assert (prop.hard_min, prop.hard_max) == pytest.approx(setting.hard_range, rel=1e-7)
+        assert (prop.soft_min, prop.soft_max) == pytest.approx(setting.soft_range, rel=1e-7)
+        # Blender folds a unit into the subtype it reports, so compare each where it shows.
+        if setting.unit is not None:
+            assert prop.unit == setting.unit
+        else:
+            assert prop.subtype == (setting.subtype or 'NONE')
+    elif kind == settings_model.ENUM:
+        assert prop.default == setting.default
+        assert [(item.identifier, item.name, item.description) for item in prop.enum_items] \
+            == [(item.identifier, item.label, item.description) for item in setting.items]
+    else:
+        assert prop.default == setting.default
+    # Every edit asks the 3D Views to redraw (viewports do not notice property edits).
+    annotation = blender_settings.CSMSettings.__annotations__[setting.identifier]
+    assert annotation.keywords["update"] is blender_settings._redraw
+
+
+def test_a_new_scene_snapshots_to_the_default_settings():
+    assert snapshot.settings_snapshot(bpy.context.scene) == default_settings()
+
+
+def test_every_settings_group_is_a_panel():
+    labels = {label for _key, label, _draw in ui.GROUPS}
+    assert {setting.group for setting in SETTINGS} <= labels
 
 
 def test_settings_live_on_the_scene_with_course_defaults():
