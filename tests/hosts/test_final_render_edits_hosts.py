@@ -3,7 +3,7 @@
 Final renders keep meshes they know to be unchanged (``mesh_cache.recipe``). Blender 3.4
 keeps vertex positions, creases and smooth flags outside ``mesh.attributes``, so a recipe
 made of attributes alone missed a moved vertex there and the second render showed the old
-geometry (seen on Debian's 3.4 before 2026-11-24). Each host renders, edits (a vertex, a
+geometry (seen on Debian's 3.4). Each host renders, edits (a vertex, a
 smooth flag, a modifier level) and renders again in one process.
 """
 
