@@ -309,7 +309,8 @@ def _slab_shadow_scene(scene):
 def test_cycles_reference_samples_pixel_centres(empty_scene):
     """The reference takes its rays through each pixel's centre, where CSM and EEVEE shade:
     with many samples and a hard sun, a shadow edge stays a step. Cycles' box filter would
-    not do (it is one pixel wide whatever its width): through it, the pixels an edge crosses come out partly shadowed."""
+    not do (it is one pixel wide whatever its width): through it, the pixels an edge
+    crosses come out partly shadowed."""
     scene = _slab_shadow_scene(empty_scene)
     width, height = SIZE
     centre = ground_truth.cycles_visibility(scene, width, height, samples=16)
