@@ -35,6 +35,12 @@ POINT_SHADOW_RESOLUTION = 512      # texels per cube face
 # soft penumbrae there read the face's edge texels again (taps are clamped to the tile).
 POINT_FACE_MARGIN_TEXELS = 4
 
+__all__ = ["CASCADE_LINE_COLORS", "MAX_ATLAS_WIDTH", "SPOT_SHADOW_RESOLUTION",
+           "POINT_SHADOW_RESOLUTION", "POINT_FACE_MARGIN_TEXELS", "ShadowTile", "ShadowPlan",
+           "instance_bounds", "plan_shadows", "gbuffer_plan", "layout_atlas", "front_to_back",
+           # re-exported
+           "depth_blocks_from_reduction", "WINDOW_FROM_CLIP", "ambient_occlusion_fields",
+           "pack_frame", "sun_tan_half_angle", "window_normal_from_world"]
 
 
 @dataclass

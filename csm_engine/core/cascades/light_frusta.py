@@ -84,6 +84,7 @@ def point_light_face_matrices(position, face, angle_rad, clip_start, clip_end):
     world_from_light[:3, 3] = np.asarray(position, dtype=np.float64)
     return spot_light_matrices(world_from_light, angle_rad, clip_start, clip_end)
 
+
 def spot_texel_size(spot_angle_rad, resolution, distance):
     """Scene units covered by one spot shadow-map texel at ``distance`` along the aim."""
     return 2.0 * math.tan(0.5 * spot_angle_rad) * distance / resolution

@@ -41,7 +41,6 @@ def _transform_points(matrix, points):
     return points @ matrix[:3, :3].T + matrix[:3, 3]
 
 
-
 def view_slice_corners(projection, near_d, far_d):
     """The 8 corners of the view-depth slice ``near_d .. far_d`` in *view* space, (8, 3).
 

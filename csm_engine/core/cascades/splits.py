@@ -44,7 +44,6 @@ def _resolution(name, value):
     return value
 
 
-
 def split_distances(near, far, count, scheme, lam=0.5, manual=None):
     """View depths (scene units) bounding each cascade: an array of ``count + 1`` values.
 
@@ -150,7 +149,6 @@ def cascade_resolutions(count, base_resolution=2048, equal_resolution=False):
         return [base] * count
     floor = min(MIN_CASCADE_RESOLUTION, base)
     return [max(base >> index, floor) for index in range(count)]
-
 
 
 def blend_band_widths(splits, blend_band):

@@ -32,7 +32,6 @@ def _circumcentres(points, subsets):
     return centres, radii, ok
 
 
-
 def _subsets(size):
     subsets = np.array(list(combinations(range(8), size)))
     subsets.setflags(write=False)
