@@ -389,7 +389,7 @@ SPOT_LIGHT_LAYOUT = UniformLayout("SpotLightData", (
 ))
 
 # Everything the G-buffer and lighting passes read for one frame. Packed by
-# shadow_plan.pack_frame.
+# frame_block.pack_frame.
 FRAME_LAYOUT = UniformLayout("FrameData", (
     ("clip_from_world", "mat4", "camera clip space (OpenGL) from world"),
     ("view_from_world", "mat4", "camera view space from world"),
@@ -434,7 +434,7 @@ FRAME_LAYOUT = UniformLayout("FrameData", (
      "atlas tiles: one per cascade, then one per shadowed spot light"),
     ("point_lights", POINT_LIGHT_LAYOUT, MAX_POINT_LIGHTS, "point lights in use first"),
     ("spot_lights", SPOT_LIGHT_LAYOUT, MAX_SPOT_LIGHTS, "spot lights in use first"),
-    # Screen-space ambient occlusion (ao_frag.glsl); packed by shadow_plan.pack_frame.
+    # Screen-space ambient occlusion (ao_frag.glsl); packed by frame_block.pack_frame.
     ("ao_enabled", "int", "1: the ambient term is multiplied by the AO texture"),
     ("ao_distance", "float", "AO distance: farther surfaces do not occlude (scene units)"),
     ("ao_strength", "float", "AO blend, 0 (no effect) to 1 (the full occlusion)"),
