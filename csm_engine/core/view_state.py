@@ -12,7 +12,7 @@ from .camera import CameraView
 from .cascades import CascadeSet, ReceiverTermsCache
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class FrozenCascades:
     """The cascades Freeze Cascades holds, and the camera they were fitted for (the
     overlay draws their boxes as seen from the moving camera)."""

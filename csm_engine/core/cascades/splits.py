@@ -4,7 +4,7 @@ Owns ``split_distances`` (uniform, logarithmic, the course's hybrid formula, or 
 distances), ``manual_splits_from_fractions`` (the settings' fractions of the shadow
 distance as distances), ``cascade_resolutions`` (texels per cascade) and
 ``blend_band_widths`` (how far before each split the next cascade fades in), with the
-checks of a cascade count and a resolution the other cascade modules share.
+checks of a cascade count and of a resolution (which fitting shares).
 numpy only.
 """
 
