@@ -8,8 +8,6 @@ G-buffer and lighting N times through jittered cameras and averages them with th
 weights; the shadow maps are planned once from the unjittered camera. numpy only.
 """
 
-import math
-
 import numpy as np
 
 from .camera import CameraView

@@ -41,6 +41,7 @@ def azimuth_elevation_from_travel(travel):
 PITCH_LIMIT_DEGREES = 89.0
 MOUSE_DEGREES_PER_PIXEL = 0.2
 WORLD_UP = np.array([0.0, 0.0, 1.0])
+WORLD_UP.setflags(write=False)
 
 
 def step(matrix, keys_down, dt, speed):

@@ -25,6 +25,8 @@ ZUP_FROM_YUP = np.array([
     [0.0, 0.0, 0.0, 1.0],
 ])
 YUP_FROM_ZUP = ZUP_FROM_YUP.T.copy()
+ZUP_FROM_YUP.setflags(write=False)
+YUP_FROM_ZUP.setflags(write=False)
 
 
 def zup_from_yup():

@@ -9,6 +9,7 @@ numpy only.
 """
 
 import re
+from types import MappingProxyType
 
 import numpy as np
 
@@ -41,12 +42,18 @@ SHADOW_FILTERS = ("HARD", "PCF", "SOFT")
 # (interval selection, the course's bands).
 CASCADE_SELECTIONS = ("MAP", "DEPTH")
 
-DEBUG_VIEW_INDEX = {name: index for index, name in enumerate(DEBUG_VIEWS)}
-PCF_PATTERN_INDEX = {name: index for index, name in enumerate(PCF_PATTERNS)}
-SPLIT_SCHEME_INDEX = {name: index for index, name in enumerate(SPLIT_SCHEMES)}
-LIGHT_FALLOFF_INDEX = {name: index for index, name in enumerate(LIGHT_FALLOFFS)}
-SHADOW_FILTER_INDEX = {name: index for index, name in enumerate(SHADOW_FILTERS)}
-CASCADE_SELECTION_INDEX = {name: index for index, name in enumerate(CASCADE_SELECTIONS)}
+
+def enum_positions(members):
+    """Each member's position in ``members`` (its GLSL value), read-only."""
+    return MappingProxyType({name: index for index, name in enumerate(members)})
+
+
+DEBUG_VIEW_INDEX = enum_positions(DEBUG_VIEWS)
+PCF_PATTERN_INDEX = enum_positions(PCF_PATTERNS)
+SPLIT_SCHEME_INDEX = enum_positions(SPLIT_SCHEMES)
+LIGHT_FALLOFF_INDEX = enum_positions(LIGHT_FALLOFFS)
+SHADOW_FILTER_INDEX = enum_positions(SHADOW_FILTERS)
+CASCADE_SELECTION_INDEX = enum_positions(CASCADE_SELECTIONS)
 
 # GLSL name prefix of each enum: DEBUG_VIEWS' "SHADOW_MAP" is DEBUG_SHADOW_MAP in GLSL.
 GLSL_ENUMS = (("DEBUG", DEBUG_VIEWS), ("PCF", PCF_PATTERNS), ("SPLIT", SPLIT_SCHEMES),
@@ -73,18 +80,19 @@ def glsl_defines():
 # (OpenGL 4.5 spec 7.6.2.2): a scalar aligns to 4, vec2 to 8, vec3 and vec4 to 16; a vec3
 # is 12 bytes, so a scalar after it fills its 4th slot; a column-major mat4 is an array of
 # 4 vec4 columns.
-_BASIC = {
+_BASIC = MappingProxyType({
     "float": (1, 4, 4, np.float32),
     "int": (1, 4, 4, np.int32),
     "vec2": (2, 8, 8, np.float32),
     "vec3": (3, 16, 12, np.float32),
     "vec4": (4, 16, 16, np.float32),
     "mat4": (16, 16, 64, np.float32),
-}
+})
 
 # Words a field must not be named after: reserved in some GLSL version Blender targets.
-_RESERVED = {"filter", "sample", "input", "output", "common", "partition", "active",
-             "resource", "patch", "buffer", "shared", "precise", "layout"}
+_RESERVED = frozenset({"filter", "sample", "input", "output", "common", "partition",
+                       "active", "resource", "patch", "buffer", "shared", "precise",
+                       "layout"})
 
 
 # Single values the packing writes directly (see UniformLayout._write_one).
@@ -381,7 +389,7 @@ SPOT_LIGHT_LAYOUT = UniformLayout("SpotLightData", (
 ))
 
 # Everything the G-buffer and lighting passes read for one frame. Packed by
-# shadow_plan.pack_frame.
+# frame_block.pack_frame.
 FRAME_LAYOUT = UniformLayout("FrameData", (
     ("clip_from_world", "mat4", "camera clip space (OpenGL) from world"),
     ("view_from_world", "mat4", "camera view space from world"),
@@ -426,7 +434,7 @@ FRAME_LAYOUT = UniformLayout("FrameData", (
      "atlas tiles: one per cascade, then one per shadowed spot light"),
     ("point_lights", POINT_LIGHT_LAYOUT, MAX_POINT_LIGHTS, "point lights in use first"),
     ("spot_lights", SPOT_LIGHT_LAYOUT, MAX_SPOT_LIGHTS, "spot lights in use first"),
-    # Screen-space ambient occlusion (ao_frag.glsl); packed by shadow_plan.pack_frame.
+    # Screen-space ambient occlusion (ao_frag.glsl); packed by frame_block.pack_frame.
     ("ao_enabled", "int", "1: the ambient term is multiplied by the AO texture"),
     ("ao_distance", "float", "AO distance: farther surfaces do not occlude (scene units)"),
     ("ao_strength", "float", "AO blend, 0 (no effect) to 1 (the full occlusion)"),

@@ -8,21 +8,21 @@ One ``GPUUniformBuf`` per material replaces per-draw push constants: those stop 
 bytes (see /work/shared/docs/blender-gpu-notes.md). numpy only.
 """
 
-from .frame_layout import UniformLayout
+from .frame_layout import UniformLayout, enum_positions
 
 # How a surface's alpha is drawn (GLSL: ALPHA_OPAQUE, ...). OPAQUE ignores alpha and runs
 # the programs that cannot discard; CLIP cuts out below the cutoff (glTF masks, Sponza);
 # HASHED keeps a pixel when its alpha beats a stable per-pixel hash, so 50% alpha covers
 # half the pixels of the image and half the texels of a shadow map.
 ALPHA_MODES = ("OPAQUE", "CLIP", "HASHED")
-ALPHA_MODE_INDEX = {name: index for index, name in enumerate(ALPHA_MODES)}
+ALPHA_MODE_INDEX = enum_positions(ALPHA_MODES)
 
 # What the channels of the "metallic-roughness" texture mean (GLSL: SURFACE_*).
 # PRINCIPLED: channels wired into Roughness / Metallic (Blender's glTF importer: G -> Roughness,
 # B -> Metallic). COURSE: the course's glTF files, specular in blue and shininess in green
 # (docs/materials.md).
 SURFACE_CONVENTIONS = ("PRINCIPLED", "COURSE")
-SURFACE_CONVENTION_INDEX = {name: index for index, name in enumerate(SURFACE_CONVENTIONS)}
+SURFACE_CONVENTION_INDEX = enum_positions(SURFACE_CONVENTIONS)
 
 GLSL_ENUMS = (("ALPHA", ALPHA_MODES), ("SURFACE", SURFACE_CONVENTIONS))
 

@@ -9,7 +9,10 @@ These closed forms never leave the calling thread. numpy only.
 
 import numpy as np
 
+from .memo import ArrayMemo
+
 _IDENTITY3 = np.eye(3)
+_IDENTITY3.setflags(write=False)
 _BOTTOM_ROW = (0.0, 0.0, 0.0, 1.0)
 # How far R @ R.T may be from the identity for R to count as a rotation: float64 matrices
 # from Blender's float32 ones are orthonormal to ~1e-7; anything off by more (scale, shear)
@@ -44,29 +47,6 @@ def inverse_rigid(m):
     out[:3, 3] = -(rotation.T @ m[:3, 3])
     out[3] = _BOTTOM_ROW
     return out
-
-
-class ArrayMemo:
-    """A pure function of one float64 array, remembered by the array's bytes (at most
-    ``size`` results; all forgotten when full). Results are made read-only, so a caller
-    cannot change what the next caller gets."""
-
-    def __init__(self, function, size):
-        self.function, self.size, self.held = function, size, {}
-
-    def __call__(self, array):
-        array = np.ascontiguousarray(array, dtype=np.float64)
-        key = array.tobytes()
-        result = self.held.get(key)
-        if result is None:
-            if len(self.held) >= self.size:
-                self.held.clear()
-            result = self.function(array)
-            for part in (result if isinstance(result, tuple) else (result,)):
-                if isinstance(part, np.ndarray):
-                    part.setflags(write=False)
-            self.held[key] = result
-        return result
 
 
 # The lens does not change while the view moves: its inverse is kept per lens.

@@ -18,6 +18,7 @@ import os
 import re
 import stat
 import struct
+from types import MappingProxyType
 from urllib.parse import unquote
 
 MEBIBYTE = 1024 * 1024
@@ -130,14 +131,14 @@ def _shown(text, limit=40):
 
 # ----------------------------------------------------------------------------------- PLY
 
-_PLY_TYPE_BYTES = {
+_PLY_TYPE_BYTES = MappingProxyType({
     "char": 1, "uchar": 1, "short": 2, "ushort": 2, "int": 4, "uint": 4,
     "float": 4, "double": 8,
     "int8": 1, "uint8": 1, "int16": 2, "uint16": 2, "int32": 4, "uint32": 4,
     "float32": 4, "float64": 8,
-}
-_PLY_INTEGER_TYPES = {"char", "uchar", "short", "ushort", "int", "uint",
-                      "int8", "uint8", "int16", "uint16", "int32", "uint32"}
+})
+_PLY_INTEGER_TYPES = frozenset({"char", "uchar", "short", "ushort", "int", "uint",
+                                "int8", "uint8", "int16", "uint16", "int32", "uint32"})
 _PLY_FORMATS = ("ascii", "binary_little_endian", "binary_big_endian")
 _WHOLE_NUMBER = re.compile(r"^[0-9]+$")
 
@@ -483,8 +484,8 @@ def check_gltf(path, size):
 
 # ---------------------------------------------------------------------------------- entry
 
-_CHECKS = {".ply": check_ply, ".stl": check_stl, ".obj": check_obj,
-           ".gltf": check_gltf, ".glb": check_gltf}
+_CHECKS = MappingProxyType({".ply": check_ply, ".stl": check_stl, ".obj": check_obj,
+                            ".gltf": check_gltf, ".glb": check_gltf})
 
 
 def check_mesh_file(path):

@@ -33,6 +33,7 @@ from ..core.shadow_plan import (CASCADE_LINE_COLORS, depth_blocks_from_reduction
                                 front_to_back, gbuffer_plan, instance_bounds,
                                 layout_atlas, pack_frame, plan_shadows)
 from ..core.frame_layout import FRAME_LAYOUT
+from ..core.view_state import ShadowViewState
 from ..core.material_layout import pack_material
 from . import shaders
 from .gpu_mesh import MaterialInfo
@@ -237,7 +238,7 @@ class RenderTargetError(Exception):
 class Pipeline:
     """GPU resources and passes for one engine instance (one GPU context)."""
 
-    def __init__(self, textures=None):
+    def __init__(self, textures=None, view_state=None):
         # Textures may be shared between GPU contexts (framebuffers may not), so final
         # renders pass one long-lived dict and skip reallocating ~80 MB of targets per frame.
         self._textures = {} if textures is None else textures
@@ -259,6 +260,9 @@ class Pipeline:
         self._held_draws = None     # the last frame's draw items and what they came from
         self._held_signatures = {}  # instance key -> (draw-list entry, caster signature)
         self._depth_pairs = None    # the last Fit to Visible Depth read-back (benchmark)
+        # What planning carries from frame to frame for this view (frozen cascades,
+        # hysteresis); a final render passes its own long-lived one.
+        self.view_state = ShadowViewState() if view_state is None else view_state
 
     # -- resources ---------------------------------------------------------------------
     def _texture(self, name, size, fmt):
@@ -382,7 +386,8 @@ class Pipeline:
         # fields (the G-buffer reads only the camera from it).
         fit_to_visible = plan is None and bool(getattr(snap.settings, "fit_to_visible", False))
         if plan is None:
-            plan = gbuffer_plan(snap, bounds) if fit_to_visible else plan_shadows(snap, bounds)
+            plan = gbuffer_plan(snap, bounds, self.view_state) if fit_to_visible else \
+                plan_shadows(snap, bounds, view_state=self.view_state)
         self.warnings.extend(w for w in snap.warnings + plan.warnings if w not in self.warnings)
         atlas, partial = (None, None) if fit_to_visible else self._atlas(plan)
         frame_data = pack_frame(snap, None if fit_to_visible else plan)
@@ -564,7 +569,7 @@ class Pipeline:
                 if blocks is not None:
                     self._textures["depth_blocks"] = blocks
             t = self._sync(gbuffer[4], "depth_range", t)
-            plan = plan_shadows(snap, bounds, blocks)
+            plan = plan_shadows(snap, bounds, blocks, view_state=self.view_state)
             self.warnings.extend(w for w in plan.warnings if w not in self.warnings)
             atlas, partial = self._atlas(plan)
             frame_ubo = self._frame_ubo(pack_frame(snap, plan, like=frame_data))

@@ -1,4 +1,4 @@
-"""Unit tests for csm_engine/core/cascades.py: the cascade math, without Blender.
+"""Unit tests for csm_engine/core/cascades/: the cascade math, without Blender.
 
 Run: ./dev test tests/unit/test_cascades.py
 """
@@ -319,21 +319,23 @@ def test_bounding_sphere_of_a_symmetric_slice_matches_the_closed_form(near, far)
     assert radius == pytest.approx(expected_radius, rel=1e-9)
 
 
-def test_view_space_sphere_is_remembered_per_slice_and_equals_the_exact_search():
-    # A camera-only redraw asks for the same view-space slices again; the answer must be
-    # the exact sphere every time, shared read-only, and a new slice must not get an old one.
-    projection = csm.CameraProjection(fov_y=math.radians(50), aspect=16 / 9)
-    first = csm.view_slice_corners(projection, 1.0, 20.0)
-    other = csm.view_slice_corners(projection, 1.0, 21.0)
-    centre, radius = csm._view_space_sphere(first)
-    again = csm._view_space_sphere(first.copy())
-    assert again[0] is centre and again[1] == radius
-    exact = csm.bounding_sphere(first)
-    np.testing.assert_array_equal(centre, exact[0])
-    assert radius == exact[1]
-    assert csm._view_space_sphere(other)[1] == csm.bounding_sphere(other)[1] != radius
-    with pytest.raises(ValueError):
-        centre[0] = 1.0
+def test_stabilized_cascades_get_the_exact_sphere_of_their_own_view_slice_every_time():
+    # A camera-only redraw asks for the same view-space slices again: each cascade must get
+    # the exact sphere of its own slice, whatever slices and cameras were asked for before.
+    projection = csm.CameraProjection(fov_y=math.radians(50), aspect=16 / 9, clip_start=1.0,
+                                      clip_end=40.0)
+    turned = np.eye(4)
+    turned[:3, :3] = [[0, -1, 0], [1, 0, 0], [0, 0, 1]]
+    turned[:3, 3] = (5.0, -3.0, 2.0)
+    for distance in (20.0, 21.0, 20.0):
+        exact = csm.bounding_sphere(csm.view_slice_corners(projection, 1.0, distance))[1]
+        for world_from_view in (np.eye(4), turned, np.eye(4)):
+            fit = csm.compute_cascades(world_from_view, projection, (0.3, -0.2, -0.9), count=1,
+                                       shadow_distance=distance).cascades[0]
+            assert fit.sphere_radius == csm.round_up_radius(exact)
+    assert csm.round_up_radius(csm.bounding_sphere(
+        csm.view_slice_corners(projection, 1.0, 21.0))[1]) != csm.round_up_radius(
+        csm.bounding_sphere(csm.view_slice_corners(projection, 1.0, 20.0))[1])
 
 
 # ----------------------------------------------------------------------------------------
@@ -687,56 +689,25 @@ def test_bad_spot_inputs_raise_value_error_naming_the_value(args, message):
         csm.spot_light_matrices(np.eye(4), *args)
 
 
-# ----------------------------------------------------------------------------------------
-# shader reference: selection, blend band, fade
+# blend bands
 # ----------------------------------------------------------------------------------------
 
 SPLITS = np.array([0.1, 10.0, 30.0, 100.0])
 
 
-def test_select_cascade_by_view_depth():
-    depths = np.array([0.0, 0.1, 5.0, 9.999, 10.0, 29.0, 30.0, 99.9, 100.0, 500.0, np.nan])
-    np.testing.assert_array_equal(csm.select_cascade(depths, SPLITS),
-                                  [0, 0, 0, 0, 1, 1, 2, 2, -1, -1, -1])
-    assert csm.select_cascade(15.0, SPLITS) == 1
-
-
-def test_blend_band_ends_at_the_split_and_fades_the_next_cascade_in_before_it():
-    band = 2.0
-    assert csm.blend_weight(7.9, SPLITS, band) == 0.0
-    assert csm.blend_weight(9.0, SPLITS, band) == pytest.approx(0.5)
-    assert csm.blend_weight(10.0 - 1e-9, SPLITS, band) == pytest.approx(1.0)
-    assert csm.blend_weight(10.0, SPLITS, band) == 0.0        # cascade 1 alone from the split on
-    assert csm.blend_weight(99.0, SPLITS, 5.0) == 0.0         # last cascade: no band
-    # Seamless: "cascade index + weight of the next" is continuous and non-decreasing.
-    depths = np.linspace(0.1, 99.99, 20001)
-    mixed = csm.select_cascade(depths, SPLITS) + csm.blend_weight(depths, SPLITS, band)
-    assert np.all(np.diff(mixed) >= -1e-12)
-    assert np.max(np.diff(mixed)) < 0.01
-
-
 def test_blend_band_is_capped_at_half_the_nearer_cascade():
     widths = csm.blend_band_widths(SPLITS, 50.0)
     np.testing.assert_allclose(widths, [4.95, 10.0, 0.0])
-    assert csm.blend_weight(0.1 + 4.95 - 1e-9, SPLITS, 50.0) == 0.0
-    assert csm.blend_weight(7.525, SPLITS, 50.0) == pytest.approx(0.5)
     with pytest.raises(ValueError, match="got -1.0"):
-        csm.blend_weight(5.0, SPLITS, -1.0)
+        csm.blend_band_widths(SPLITS, -1.0)
 
 
-def test_hard_switch_without_band():
-    depths = np.linspace(0.1, 99.9, 1000)
-    np.testing.assert_array_equal(csm.blend_weight(depths, SPLITS, 0.0), 0.0)
+def test_no_blend_band_and_none_after_the_last_cascade():
+    np.testing.assert_array_equal(csm.blend_band_widths(SPLITS, 0.0), 0.0)
+    np.testing.assert_allclose(csm.blend_band_widths(SPLITS, 2.0), [2.0, 2.0, 0.0])
 
 
-def test_distance_fade_over_the_last_part_of_the_shadow_distance():
-    np.testing.assert_allclose(csm.distance_fade([0.0, 89.9, 95.0, 100.0, 150.0], 100.0, 0.1),
-                               [1.0, 1.0, 0.5, 0.0, 0.0], atol=1e-12)
-    np.testing.assert_array_equal(csm.distance_fade([99.9, 100.0], 100.0, 0.0), [1.0, 0.0])
-    with pytest.raises(ValueError, match="got 1.5"):
-        csm.distance_fade(1.0, 100.0, 1.5)
-
-
-def test_module_imports_neither_bpy_nor_gpu():
-    source = Path(csm.__file__).read_text()
-    assert not re.search(r"^\s*(import|from)\s+(bpy|gpu)\b", source, re.MULTILINE)
+def test_modules_import_neither_bpy_nor_gpu():
+    for path in Path(csm.__file__).parent.glob("*.py"):
+        source = path.read_text()
+        assert not re.search(r"^\s*(import|from)\s+(bpy|gpu)\b", source, re.MULTILINE), path

@@ -243,7 +243,8 @@ def _snapshot_and_plan():
                                pcf_pattern="CROSS5", depth_bias=0.5, slope_bias=1.5,
                                normal_offset=0.75, debug_view="TEXEL_DENSITY",
                                debug_shadow_map=3, debug_inset=True,
-                               cascade_selection="DEPTH")
+                               cascade_selection="DEPTH", ambient_occlusion=False,
+                               ao_distance=0.0, ao_strength=0.0)
     spot = SpotLight(position=np.array([4.0, 5.0, 6.0]), direction=np.array([0.0, 0.0, -1.0]),
                      color=np.array([7.0, 8.0, 9.0]), radius=20.0, spot_size=1.0,
                      spot_blend=0.2, casts_shadow=True, world_from_light=np.eye(4),
@@ -254,7 +255,7 @@ def _snapshot_and_plan():
                 casts_shadow=True),
         points=[PointLight(np.array([1.0, 1.0, 1.0]), np.array([0.5, 0.25, 0.125]), 10.0)],
         spots=[spot, spot], ambient=np.array([0.1, 0.2, 0.3]),
-        background=np.array([0.4, 0.5, 0.6]), film_transparent=True)
+        background=np.array([0.4, 0.5, 0.6]), film_transparent=True, sample_index=0)
     tiles = [ShadowTile(rng.normal(size=(4, 4)), 1024 >> i, 0.01 * (i + 1), 1.0 + i, 50.0 + i,
                         False, origin=(1024 * i, 0), display_near=2.0 + i) for i in range(2)]
     tiles.append(ShadowTile(rng.normal(size=(4, 4)), 512, 0.002, 0.1, 20.0, True,

@@ -45,9 +45,15 @@ def test_inverse_rigid_of_a_scaled_matrix_is_the_general_inverse(scale):
     np.testing.assert_allclose(matrices.inverse_rigid(m), np.linalg.inv(m), atol=1e-12)
 
 
-def test_inverse_projection_is_kept_per_lens_and_read_only():
+def test_inverse_projection_is_the_same_for_every_call_and_read_only():
     p = np.array([[1.2, 0, 0.1, 0], [0, 2.0, 0, 0], [0, 0, -1.01, -0.2], [0, 0, -1, 0]])
     first = matrices.inverse_projection(p)
     np.testing.assert_allclose(first @ p, np.eye(4), atol=1e-12)
-    assert matrices.inverse_projection(p.copy()) is first
+    np.testing.assert_array_equal(first, np.linalg.inv(p))
+    np.testing.assert_array_equal(matrices.inverse_projection(p.copy()), first)
     assert not first.flags.writeable
+    # Another lens asked for in between does not change what this one gets.
+    other = p.copy()
+    other[0, 0] = 0.8
+    np.testing.assert_array_equal(matrices.inverse_projection(other), np.linalg.inv(other))
+    np.testing.assert_array_equal(matrices.inverse_projection(p), np.linalg.inv(p))

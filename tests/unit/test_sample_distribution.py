@@ -1,5 +1,5 @@
-"""Fitting cascades to what the camera sees (core/cascades.py: visible_depth_range,
-receiver_square; core/shadow_plan.py: depth_blocks_from_reduction,
+"""Fitting cascades to what the camera sees (core/cascades/receivers.py:
+depth_blocks_from_reduction, visible_depth_range, receiver_square; core/frame_block.py:
 window_normal_from_world)."""
 import math
 
@@ -8,8 +8,8 @@ import pytest
 
 from csm_engine.core import cascades
 from csm_engine.core.camera import CameraProjection
-from csm_engine.core.shadow_plan import (WINDOW_FROM_CLIP, depth_blocks_from_reduction,
-                                         window_normal_from_world)
+from csm_engine.core.cascades import depth_blocks_from_reduction
+from csm_engine.core.frame_block import WINDOW_FROM_CLIP, window_normal_from_world
 
 PROJECTION = CameraProjection(kind="PERSP", fov_y=math.radians(50), aspect=16 / 9,
                               clip_start=0.1, clip_end=500.0)
@@ -189,3 +189,38 @@ def test_receiver_rectangle_bounds_equal_every_corners_bounds(projection):
         lo, hi = _corner_bounds(world_from_view, projection, blocks, 10.0, 40.0, rotation)
         np.testing.assert_allclose(centre, 0.5 * (lo + hi), rtol=1e-12, atol=1e-10)
         assert np.all(half >= 0.5 * (hi - lo)) and np.all(half <= (hi - lo) + 1e-9)
+
+
+def test_a_views_receiver_cache_gives_what_computing_afresh_gives():
+    """A view keeps its per-block terms (``ReceiverTermsCache``) from frame to frame; with
+    the blocks, the camera, the lens or the light changed between frames, every rectangle
+    must be the one computed without it."""
+    cache = cascades.ReceiverTermsCache()
+    narrow = CameraProjection(kind="PERSP", fov_y=math.radians(30), aspect=16 / 9,
+                              clip_start=0.1, clip_end=500.0)
+    moved = np.eye(4)
+    moved[:3, 3] = (3.0, -1.0, 0.5)
+    turned = cascades.light_view_matrix(np.array([-0.4, 0.1, -1.0]))
+    near_blocks, far_blocks = _blocks(10.0, 40.0), _blocks(12.0, 35.0)
+    # A view the scene fills: every frame's blocks share the same read-only corner arrays.
+    filled = [depth_blocks_from_reduction(np.full((9, 16, 2), (near, 40.0)), 16, 256, 144)
+              for near in (10.0, 11.0)]
+    assert filled[0][0] is filled[1][0] and not filled[0][0].flags.writeable
+    frames = [(np.eye(4), PROJECTION, filled[0], ROTATION),
+              (np.eye(4), narrow, filled[1], ROTATION),
+              (moved, narrow, filled[1], ROTATION),
+              (moved, PROJECTION, filled[0], turned),(np.eye(4), PROJECTION, near_blocks, ROTATION),
+              (np.eye(4), PROJECTION, near_blocks, ROTATION),      # nothing changed
+              (moved, PROJECTION, near_blocks, ROTATION),
+              (moved, narrow, near_blocks, ROTATION),
+              (moved, narrow, far_blocks, ROTATION),
+              (moved, narrow, far_blocks, turned),
+              (np.eye(4), PROJECTION, near_blocks, ROTATION)]
+    for world_from_view, projection, blocks, rotation in frames:
+        for near, far in ((10.0, 20.0), (15.0, 30.0)):
+            kept = cascades.receiver_square(world_from_view, projection, blocks, near, far,
+                                            rotation, cache=cache)
+            fresh = cascades.receiver_square(world_from_view, projection, blocks, near, far,
+                                             rotation)
+            np.testing.assert_array_equal(kept[0], fresh[0])
+            np.testing.assert_array_equal(kept[1], fresh[1])

@@ -19,7 +19,8 @@ SETTINGS = dict(
     fade_out=True, fade_fraction=0.1, pcf_radius=1, pcf_pattern="GRID", pcf_sharpen=3.0, depth_bias=1.0,
     slope_bias=1.0, normal_offset=0.5, blend_band=0.1, occluder_margin_auto=True,
     occluder_margin=0.0, freeze_cascades=False, cull_front_faces=False, debug_view="NONE",
-    debug_shadow_map=0, debug_inset=False, ambient_strength=1.0, cascade_selection="MAP")
+    debug_shadow_map=0, debug_inset=False, ambient_strength=1.0, cascade_selection="MAP",
+    fit_to_visible=False, ambient_occlusion=False, ao_distance=0.0, ao_strength=0.0)
 
 
 def _snapshot(**overrides):

@@ -1,0 +1,49 @@
+"""What one view's shadow planning remembers from one frame to the next.
+
+Owns ``ShadowViewState``. The engine keeps one per view (each viewport, and the final
+render) and hands it to ``shadow_plan.plan_shadows``; two views of one scene never see each
+other's frozen cascades or hysteresis. Everything else in ``core`` is a function of its
+arguments (memos of pure functions aside, see ``memo.py``). Plain data, numpy only.
+"""
+
+from dataclasses import dataclass
+
+from .camera import CameraView
+from .cascades import CascadeSet, ReceiverTermsCache
+
+
+@dataclass(frozen=True, eq=False)
+class FrozenCascades:
+    """The cascades Freeze Cascades holds, and the camera they were fitted for (the
+    overlay draws their boxes as seen from the moving camera)."""
+    cascades: CascadeSet
+    camera: CameraView
+
+
+class ShadowViewState:
+    """One view's shadow-planning state, carried from frame to frame.
+
+    - ``frozen``: ``FrozenCascades`` while Freeze Cascades is on, else None.
+    - ``fitted_depth_range``, ``receiver_rectangles``: the visible depth range and the
+      per-cascade receiver rectangles the cascades were last fitted to (Fit to Visible
+      Depth). A viewport frame holds them while the new ones still fit
+      (``cascades.visible_depth_range``, ``cascades.receiver_square``), so the cascades
+      do not pop while the view moves; a final render ignores them.
+    - ``receiver_cache``: the per-block terms of the last fit
+      (``cascades.ReceiverTermsCache``), kept while the blocks and the camera stay.
+
+    A view that switches to another scene starts afresh (``follow_scene``).
+    """
+
+    def __init__(self, scene_name=None):
+        self.scene_name = scene_name
+        self.frozen = None
+        self.fitted_depth_range = None
+        self.receiver_rectangles = None
+        self.receiver_cache = ReceiverTermsCache()
+
+    def follow_scene(self, scene_name):
+        """Forget everything fitted for another scene than ``scene_name``: a view that
+        shows another scene must not draw with the first one's cascades."""
+        if scene_name != self.scene_name:
+            self.__init__(scene_name)
