@@ -1,7 +1,6 @@
 """core/frame_layout.py: std140 offsets, the generated GLSL, packing round trips, the enums
 and limits given to GLSL as #defines, and pack_frame filling the frame block by name."""
 
-import ast
 import re
 from pathlib import Path
 from types import SimpleNamespace
@@ -9,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from csm_engine.core import cascades, frame_layout
+from csm_engine.core import cascades, frame_layout, settings_model
 from csm_engine.core.frame import PointLight, SpotLight, Sun, spot_cone_cosines
 from csm_engine.core.frame_layout import FRAME_LAYOUT, UniformLayout, glsl_defines
 from csm_engine.core.shadow_plan import WINDOW_FROM_CLIP, ShadowPlan, ShadowTile, pack_frame
@@ -210,20 +209,11 @@ def test_enum_values_are_their_positions():
     assert frame_layout.PCF_PATTERN_INDEX["NINE_TAP"] == 2
 
 
-def _settings_identifiers(name):
-    """Identifiers that blender/settings.py labels for an enum, in order (its literal
-    ``<NAME>_LABELS`` dict; read, not imported: it needs bpy)."""
-    tree = ast.parse((PACKAGE / "blender" / "settings.py").read_text(encoding="utf-8"))
-    for node in tree.body:
-        if isinstance(node, ast.Assign) and any(getattr(t, "id", None) == name + "_LABELS"
-                                                for t in node.targets):
-            return tuple(ast.literal_eval(node.value))
-    raise AssertionError(f"settings.py has no {name}_LABELS")
-
-
-@pytest.mark.parametrize("name", ["DEBUG_VIEWS", "PCF_PATTERNS", "SPLIT_SCHEMES"])
-def test_enums_match_the_blender_settings(name):
-    assert _settings_identifiers(name) == getattr(frame_layout, name)
+@pytest.mark.parametrize("name, setting", [("DEBUG_VIEWS", "debug_view"),
+                                           ("PCF_PATTERNS", "pcf_pattern"),
+                                           ("SPLIT_SCHEMES", "split_scheme")])
+def test_enums_match_the_blender_settings(name, setting):
+    assert settings_model.BY_IDENTIFIER[setting].identifiers == getattr(frame_layout, name)
 
 
 def test_limits_and_schemes_agree_with_cascades():
