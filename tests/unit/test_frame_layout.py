@@ -229,7 +229,7 @@ def _snapshot_and_plan():
                              world_from_view=np.eye(4) + 0.1 * rng.normal(size=(4, 4)),
                              position=(1.0, 2.0, 3.0), forward=(0.0, 1.0, 0.0),
                              is_perspective=True, width=640, height=360)
-    settings = SimpleNamespace(fade_out=True, fade_fraction=0.25, pcf_radius=2, pcf_sharpen=2.5,
+    settings = settings_model.default_settings(fade_out=True, fade_fraction=0.25, pcf_radius=2, pcf_sharpen=2.5,
                                pcf_pattern="CROSS5", depth_bias=0.5, slope_bias=1.5,
                                normal_offset=0.75, debug_view="TEXEL_DENSITY",
                                debug_shadow_map=3, debug_inset=True,

@@ -2,7 +2,6 @@
 cascades and spot tiles planned, packed into one atlas, and the uniform block filled, all
 without Blender or a GPU."""
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -11,16 +10,12 @@ from csm_engine.core import shadow_plan
 from csm_engine.core.camera import CameraProjection, CameraView
 from csm_engine.core.frame import FrameSnapshot, SpotLight, Sun
 from csm_engine.core.frame_layout import FRAME_LAYOUT
+from csm_engine.core.settings_model import default_settings
 
-SETTINGS = dict(
-    cascade_count=3, split_scheme="HYBRID", split_lambda=0.5, fitted_split_lambda=0.9,
-    manual_splits=(0.1, 0.3, 0.6),
-    shadow_distance=0.0, resolution=2048, equal_resolution=False, stabilize=True,
-    fade_out=True, fade_fraction=0.1, pcf_radius=1, pcf_pattern="GRID", pcf_sharpen=3.0, depth_bias=1.0,
-    slope_bias=1.0, normal_offset=0.5, blend_band=0.1, occluder_margin_auto=True,
-    occluder_margin=0.0, freeze_cascades=False, cull_front_faces=False, debug_view="NONE",
-    debug_shadow_map=0, debug_inset=False, ambient_strength=1.0, cascade_selection="MAP",
-    fit_to_visible=False, ambient_occlusion=False, ao_distance=0.0, ao_strength=0.0)
+# The model's defaults, except what these tests were written against: the plain fit over
+# clip start .. far (no G-buffer here), no AO, a thin blend band and slope bias 1.
+SETTINGS = dict(slope_bias=1.0, blend_band=0.1, fit_to_visible=False, ambient_occlusion=False,
+                ao_distance=0.0, ao_strength=0.0)
 
 
 def _snapshot(**overrides):
@@ -30,7 +25,7 @@ def _snapshot(**overrides):
     projection = CameraProjection(fov_y=math.radians(50), aspect=16 / 9, clip_start=0.1,
                                   clip_end=120.0)
     camera = CameraView(world_from_view, projection.clip_from_view(), 320, 180)
-    settings = SimpleNamespace(**dict(SETTINGS, **overrides))
+    settings = default_settings(**dict(SETTINGS, **overrides))
     sun = Sun(to_light=np.array([0.3, -0.2, 0.93]) / np.linalg.norm([0.3, -0.2, 0.93]),
               color=np.ones(3), casts_shadow=True)
     return FrameSnapshot(camera=camera, settings=settings, sun=sun, scene_name="plan_test")
