@@ -1,7 +1,9 @@
 """GLSL programs: loading from ``shaders/``, includes, uniform-block layouts, hot reload.
 
-Owns every ``gpu.types.GPUShader`` the pipeline uses. GLSL lives as real files in
-``shaders/``; ``#include "file.glsl"`` is resolved here (create-info has no include
+Owns every ``gpu.types.GPUShader`` the pipeline uses. GLSL lives as real files in the
+GLSL library ``shaders/`` (the repository's top-level folder in a checkout, the package's
+own copy once installed: ``core/paths.py`` finds it); ``#include "file.glsl"`` is resolved
+here (create-info has no include
 mechanism), and each included file gets its own ``#line N id`` so compiler messages can be
 mapped back to ``file.glsl:line``.
 
@@ -354,8 +356,14 @@ class ShaderLibrary:
         except (AttributeError, TypeError):   # interpreter shutdown
             pass
 
+    @property
+    def folder(self):
+        """The folder the programs are (re)compiled from: the one given, else the running
+        add-on's own GLSL library (a checkout's shaders/, or the installed copy)."""
+        return self.directory or paths.shaders_dir()
+
     def _compile_all(self):
-        directory = self.directory or paths.shaders_dir()
+        directory = self.folder
         compiled = {}
         try:
             for name, spec in PROGRAMS.items():

@@ -1,7 +1,8 @@
 """The packages from tools/build.py install and work the way a user would use them.
 
 * Every package (extension zip, legacy zip, wheel) carries the whole ``csm_engine``
-  package with its ``shaders/`` and ``data/``, and LICENSE; none carries a measuring
+  package with its ``data/``, the repository's top-level GLSL library ``shaders/`` inside
+  the package (as ``csm_engine/shaders/``), and LICENSE; none carries a measuring
   tool (benchmark, model fetching, ground truth, quality report) or starts processes.
 * The extension zip passes Blender's own validator, then installs through
   ``extensions.package_install_files`` and enables in pip bpy 5.0 and pip bpy 4.2: CSM is
@@ -32,6 +33,7 @@ import pytest
 pytestmark = pytest.mark.hosts
 
 from tests.conftest import PACKAGE, REPO
+SHADERS = os.path.join(REPO, "shaders")
 RENDER_SIZE = (160, 120)
 # A pixel counts as lit when the sun adds at least this much to its luminance (0..1 PNG).
 LIT_THRESHOLD = 0.05
@@ -76,16 +78,30 @@ def archives(tmp_path_factory):
     return paths
 
 
-def _source_files():
-    """What every package must carry, relative to the package folder: all of csm_engine
-    (code, shaders/, data/) and LICENSE."""
-    files = {"LICENSE"}
-    for folder, dirs, names in os.walk(PACKAGE):
+def _files_under(top, inside=""):
+    files = set()
+    for folder, dirs, names in os.walk(top):
         dirs[:] = [d for d in dirs if d != "__pycache__" and not d.startswith(".")]
         for name in names:
             if not name.startswith(".") and not name.endswith((".pyc", "~")):
-                files.add(os.path.relpath(os.path.join(folder, name), PACKAGE).replace(os.sep, "/"))
+                relative = os.path.relpath(os.path.join(folder, name), top).replace(os.sep, "/")
+                files.add(inside + relative)
     return files
+
+
+def _shader_files():
+    """The checkout's GLSL library as every package carries it: inside the package."""
+    files = _files_under(SHADERS, "shaders/")
+    assert "shaders/lighting_frag.glsl" in files and len(files) >= 10, sorted(files)
+    return files
+
+
+def _source_files():
+    """What every package must carry, relative to the package folder: all of csm_engine
+    (code, data/), the top-level shaders/ as the package's shaders/, and LICENSE."""
+    assert not os.path.exists(os.path.join(PACKAGE, "shaders")), (
+        "the GLSL lives in the top-level shaders/, not in csm_engine/shaders/")
+    return {"LICENSE"} | _files_under(PACKAGE) | _shader_files()
 
 
 def _bl_info():
@@ -107,7 +123,7 @@ def test_extension_zip_has_the_package_at_its_root_with_shaders_and_data(archive
     assert not missing, f"extension zip lacks {sorted(missing)}"
     assert "blender_manifest.toml" in names
     assert "scenes/default.json" not in names and "data/scenes/default.json" in names
-    assert "shaders/common.glsl" in names and "core/paths.py" in names
+    assert _shader_files() <= names and "core/paths.py" in names
     stray = [n for n in names if "__pycache__" in n or n.endswith(".pyc") or n.startswith("tests/")]
     assert not stray, f"extension zip carries build droppings: {stray}"
 
@@ -117,6 +133,7 @@ def test_legacy_zip_is_one_csm_engine_folder_with_shaders_and_data(archives):
     expected = {"csm_engine/" + name for name in _source_files()}
     missing = expected - names
     assert not missing, f"legacy zip lacks {sorted(missing)}"
+    assert {"csm_engine/" + name for name in _shader_files()} <= names
     outside = [n for n in names if not n.startswith("csm_engine/")]
     assert not outside, f"legacy zip has files outside csm_engine/: {outside}"
     stray = [n for n in names if "__pycache__" in n or n.endswith(".pyc")]
@@ -131,6 +148,7 @@ def test_wheel_has_the_package_with_shaders_data_and_a_csm_render_command(archiv
         expected = {"csm_engine/" + n for n in _source_files() if n != "LICENSE"}
         missing = expected - names
         assert not missing, f"wheel lacks {sorted(missing)}"
+        assert {"csm_engine/" + name for name in _shader_files()} <= names
         outside = [n for n in names if not n.startswith(("csm_engine/", info + "/"))]
         assert not outside, f"wheel has files outside csm_engine/ and {info}/: {outside}"
         assert {f"{info}/{n}" for n in ("METADATA", "WHEEL", "RECORD", "entry_points.txt",
@@ -257,7 +275,7 @@ def test_extension_zip_passes_blenders_validator(archives, hosts):
 
 def _copy_checkout(target):
     """The parts of the checkout that tools/build.py reads, in a folder of another name."""
-    for name in ("tools", "csm_engine"):
+    for name in ("tools", "csm_engine", "shaders"):
         shutil.copytree(os.path.join(REPO, name), os.path.join(target, name),
                         ignore=shutil.ignore_patterns("__pycache__"))
     for name in ("blender_manifest.toml", "LICENSE", "pyproject.toml", "README.md"):
