@@ -194,10 +194,26 @@ class ShaderCompileError(Exception):
 LINES_PER_FILE = 10000
 
 
-def _expand_includes(name, directory, file_ids, depth=0):
-    """Return ``name``'s source with includes inlined and ``#line`` markers for mapping."""
+# Preprocessor lines that may leave a conditional group: the lines after them get their
+# number again (see _expand_includes).
+_CONDITIONAL_END = re.compile(r"^\s*#\s*(else|elif|endif)\b")
+
+
+def _expand_includes(name, directory, file_ids, depth=0, included=None):
+    """Return ``name``'s source with includes inlined and ``#line`` markers for mapping.
+
+    The GLSL library's files include what they use, so one file may be asked for twice
+    (the shadow filters and the debug views both read the atlas): each file is inlined
+    once per stage (``included``), later requests give nothing. After every ``#else``,
+    ``#elif`` and ``#endif`` the file's own line number is set again, because a ``#line``
+    inside a group the preprocessor skips is skipped too, while the skipped lines still
+    count."""
     if depth > 8:
         raise ShaderCompileError(f"{name}: #include nested too deeply (a cycle?)")
+    included = set() if included is None else included
+    if name in included:
+        return ""
+    included.add(name)
     path = os.path.join(directory, name)
     try:
         with open(path, encoding="utf-8") as handle:
@@ -214,10 +230,13 @@ def _expand_includes(name, directory, file_ids, depth=0):
     for number, line in enumerate(text.splitlines(), start=1):
         match = _INCLUDE.match(line)
         if match:
-            out.append(_expand_includes(match.group(1), directory, file_ids, depth + 1))
+            out.append(_expand_includes(match.group(1), directory, file_ids, depth + 1,
+                                        included))
             out.append(f"#line {base + number + 1}")
         else:
             out.append(line)
+            if _CONDITIONAL_END.match(line):
+                out.append(f"#line {base + number + 1}")
     return "\n".join(out) + "\n"
 
 
