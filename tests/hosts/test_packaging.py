@@ -6,7 +6,8 @@
   tool (benchmark, model fetching, ground truth, quality report) or starts processes.
 * The extension zip passes Blender's own validator, then installs through
   ``extensions.package_install_files`` and enables in pip bpy 5.0 and pip bpy 4.2: CSM is
-  then a render engine a scene can use, and it renders a lit cube from the installed copy.
+  then a render engine a scene can use, and it renders a lit cube from the installed copy;
+  F5 (Reload Shaders) reloads the installed copy of the shaders.
 * The legacy zip installs through ``preferences.addon_install`` + ``addon_enable`` in
   Debian's Blender 3.4, and ``blender -b file.blend -E CSM -f 1`` renders the default
   scene with the add-on enabled from the saved preferences.
@@ -327,6 +328,49 @@ def test_build_refuses_to_ship_without_the_license_or_with_two_versions(tmp_path
     assert "version mismatch" in result.stderr and "Traceback" not in result.stderr, result.stderr
 
 
+def test_build_ships_the_top_level_shaders_and_refuses_a_second_or_missing_copy(tmp_path):
+    clone = tmp_path / "two copies"
+    _copy_checkout(str(clone))
+    shutil.copytree(clone / "shaders", clone / "csm_engine" / "shaders")
+    result = _run_build(str(clone), str(clone / "dist"))
+    assert result.returncode == 1
+    assert "csm_engine/shaders exists" in result.stderr and "Traceback" not in result.stderr, \
+        result.stderr
+    shutil.rmtree(clone / "csm_engine" / "shaders")
+    shutil.rmtree(clone / "shaders")
+    result = _run_build(str(clone), str(clone / "dist"))
+    assert result.returncode == 1
+    assert "shaders/lighting_frag.glsl is missing" in result.stderr, result.stderr
+    assert not any(os.path.isfile(p) for p in _package_paths(str(clone / "dist"), "0.1.0"))
+
+
+def test_the_sdist_keeps_the_checkout_layout_and_builds_the_same_wheel(archives, tmp_path):
+    """pip builds from an sdist too: it has shaders/ at the top as the checkout does, and
+    the backend inside it makes the very wheel tools/build.py makes."""
+    import tarfile
+    command = [sys.executable, "-c", "import sys, build; print(build.build_sdist(sys.argv[1]))",
+               str(tmp_path)]
+    made = subprocess.run(command, cwd=os.path.join(REPO, "tools"), capture_output=True,
+                          text=True, timeout=300)
+    assert made.returncode == 0, made.stderr
+    with tarfile.open(tmp_path / made.stdout.strip()) as archive:
+        archive.extractall(tmp_path / "sdist", filter="data")
+    (root,) = (tmp_path / "sdist").iterdir()
+    assert {"shaders/" + n.split("/", 1)[1] for n in _shader_files()} == {
+        f"shaders/{p.name}" for p in (root / "shaders").iterdir()}
+    assert not (root / "csm_engine" / "shaders").exists()
+    command = [sys.executable, "-c", "import sys, build; print(build.build_wheel(sys.argv[1]))",
+               str(tmp_path / "wheel")]
+    made = subprocess.run(command, cwd=str(root / "tools"), capture_output=True, text=True,
+                          timeout=300)
+    assert made.returncode == 0, made.stderr
+    with zipfile.ZipFile(archives[2]) as a, \
+            zipfile.ZipFile(tmp_path / "wheel" / made.stdout.strip()) as b:
+        assert sorted(a.namelist()) == sorted(b.namelist())
+        for name in a.namelist():
+            assert a.read(name) == b.read(name), f"{name} differs between the wheels"
+
+
 # --- pip bpy hosts: install the extension and render with it -----------------------------
 
 # Runs inside the host. argv: extension zip, output PNG folder. Prints one CSM_RESULT line.
@@ -392,6 +436,34 @@ try:
         result[name + "_png"] = scene.render.filepath
 except Exception as error:
     result["render_error"] = "%%s: %%s" %% (type(error).__name__, error)
+
+# F5 in the installed add-on: it reloads the installed copy of the shaders. A broken line
+# there is reported with its file and line, and the fix picked up by the next F5.
+def reload_shaders():
+    try:
+        return sorted(bpy.ops.csm.reload_shaders())
+    except RuntimeError as error:   # bpy.ops raises on an ERROR report
+        return str(error)
+
+try:
+    if package is not None:
+        library = importlib.import_module(package.__name__ + ".render.shaders").LIBRARY
+        result["f5_folder"] = library.folder
+        result["f5"] = reload_shaders()
+        lighting = os.path.join(library.folder, "lighting_frag.glsl")
+        with open(lighting, encoding="utf-8") as handle:
+            good = handle.read()
+        lines = good.splitlines()
+        result["f5_broken_line"] = lines.index("{") + 2
+        lines.insert(result["f5_broken_line"] - 1, "  float broken = ;")
+        with open(lighting, "w", encoding="utf-8") as handle:
+            handle.write("\n".join(lines) + "\n")
+        result["f5_broken"] = reload_shaders()
+        with open(lighting, "w", encoding="utf-8") as handle:
+            handle.write(good)
+        result["f5_fixed"] = reload_shaders()
+except Exception as error:
+    result["f5_error"] = "%%s: %%s" %% (type(error).__name__, error)
 print("CSM_RESULT " + json.dumps(result), flush=True)
 ''' % {"width": RENDER_SIZE[0], "height": RENDER_SIZE[1]}
 
@@ -430,6 +502,13 @@ def _install_extension_and_render(python, archives, host_dir, hosts, what):
     assert "render_error" not in result, f"{what}: render failed: {result['render_error']}\n{run.describe()}"
     assert result["scene_engine"] == "CSM"
     _assert_sun_lights_the_frame(result["lit_png"], result["unlit_png"], hosts, what)
+    # F5 reloads the installed copy: it reports a line broken there, then picks up the fix.
+    assert "f5_error" not in result, f"{what}: F5 failed: {result['f5_error']}\n{run.describe()}"
+    assert result["f5_folder"] == result["shaders_dir"], result
+    assert result["f5"] == ["FINISHED"], result
+    assert f"lighting_frag.glsl:{result['f5_broken_line']}" in result["f5_broken"], result
+    assert "keeping the previous shaders" in result["f5_broken"], result
+    assert result["f5_fixed"] == ["FINISHED"], result
     return result
 
 
