@@ -2,10 +2,11 @@
 
 Owns every ``gpu.types.GPUShader`` the pipeline uses. GLSL lives as real files in the
 GLSL library ``shaders/`` (the repository's top-level folder in a checkout, the package's
-own copy once installed: ``core/paths.py`` finds it); ``#include "file.glsl"`` is resolved
-here (create-info has no include
-mechanism), and each included file gets its own ``#line N id`` so compiler messages can be
-mapped back to ``file.glsl:line``.
+own copy once installed: ``core/paths.py`` finds it). A program names its two stage files;
+the library's topical files (shadow filters, cascade selection, BRDF, debug views...) are
+pulled in by ``#include "file.glsl"``, resolved here (create-info has no include
+mechanism): each file at most once per stage, and each with its own block of line numbers
+so compiler messages can be mapped back to ``file.glsl:line``.
 
 The frame uniform block is described once, in ``core/frame_layout.py`` (``FRAME_LAYOUT``),
 which generates both the std140 GLSL structs and the numpy packing, so the two can never
@@ -159,7 +160,7 @@ PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_normal"),
                            defines=(("AO_BLUR", "1"),))
 PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),)
 
-# One lighting program per Shadow Filter setting (SHADOW_FILTER, see common.glsl): the
+# One lighting program per Shadow Filter setting (SHADOW_FILTER, see shadow_lookup.glsl): the
 # plain "lighting" is PCF. Each has "_points" and "_spots" twins with the point- and
 # spot-light loops (POINT_LIGHTS, SPOT_LIGHTS), used when the scene has such lights:
 # llvmpipe pays for a loop's first pass even when it runs no times.
