@@ -10,9 +10,11 @@ Owns packaging: one command, ``python tools/build.py`` (``./dev build``), writes
 * ``dist/csm_engine-<version>-py3-none-any.whl``: the Python package for pip bpy users,
   with the ``csm-render`` command (``python -m csm_engine``).
 
-All three carry the ``csm_engine`` package as it is in the checkout (``shaders/`` and
-``data/`` live inside it) plus ``LICENSE``; the measuring tools (``tools/csm_tools``) and
-tests are never in it. The same module is the PEP 517 backend named in ``pyproject.toml``
+All three carry the ``csm_engine`` package as it is in the checkout (``data/`` lives inside
+it), the repository's top-level GLSL library ``shaders/`` placed inside the package as
+``csm_engine/shaders/`` (an installed add-on or wheel is one folder; ``core/paths.py``
+finds the GLSL in either place), plus ``LICENSE``; the measuring tools
+(``tools/csm_tools``) and tests are never in it. The same module is the PEP 517 backend named in ``pyproject.toml``
 (``build_wheel``, ``build_sdist``), so ``pip install <checkout>`` makes the very wheel
 ``./dev build`` does, offline and with nothing but the standard library. Runs on any
 Python 3.11; only the extension needs a pip bpy install somewhere, for Blender's tool
@@ -37,8 +39,11 @@ import zipfile
 
 REPO_ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PACKAGE_NAME = "csm_engine"
-# What the package cannot work without; a checkout missing one is refused, not shipped.
-REQUIRED_RESOURCES = (os.path.join("shaders", "common.glsl"),
+# The GLSL library: a top-level folder of the checkout, shipped inside the package.
+SHADERS_DIR = "shaders"
+# What the package cannot work without (relative to the package folder, as shipped); a
+# checkout missing one is refused, not shipped.
+REQUIRED_RESOURCES = (os.path.join(SHADERS_DIR, "lighting_frag.glsl"),
                       os.path.join("data", "scenes", "default.json"))
 # Nothing a user's Blender needs: caches, tests and editor droppings.
 EXCLUDED_NAMES = ("__pycache__", "*.pyc", "*.pyo", "tests", ".*", "*~", "*.blend1")
@@ -97,26 +102,44 @@ def _excluded(name):
     return any(fnmatch.fnmatch(name, pattern) for pattern in EXCLUDED_NAMES)
 
 
-def package_files(root=REPO_ROOT):
-    """(absolute path, path inside the package folder) of every file every package ships,
-    sorted: the csm_engine package with its shaders and data, and LICENSE at its root."""
-    package_dir = os.path.join(root, PACKAGE_NAME)
-    if not os.path.isfile(os.path.join(package_dir, "__init__.py")):
-        raise BuildError(f"{package_dir}/__init__.py is missing")
-    for resource in REQUIRED_RESOURCES:
-        if not os.path.isfile(os.path.join(package_dir, resource)):
-            raise BuildError(f"{os.path.join(package_dir, resource)} is missing")
-    # The GPL asks for its text to travel with the code.
-    license_path = os.path.join(root, "LICENSE")
-    if not os.path.isfile(license_path):
-        raise BuildError(f"{license_path} is missing (the manifest declares GPL-3.0-or-later)")
-    files = [(license_path, "LICENSE")]
-    for folder, dirs, names in os.walk(package_dir):
+def _walk(top, inside):
+    """(absolute path, ``inside``/relative path) of every shipped file under ``top``."""
+    found = []
+    for folder, dirs, names in os.walk(top):
         dirs[:] = sorted(d for d in dirs if not _excluded(d))
         for name in sorted(names):
             if not _excluded(name):
                 path = os.path.join(folder, name)
-                files.append((path, os.path.relpath(path, package_dir).replace(os.sep, "/")))
+                relative = os.path.relpath(path, top).replace(os.sep, "/")
+                found.append((path, f"{inside}/{relative}" if inside else relative))
+    return found
+
+
+def package_files(root=REPO_ROOT):
+    """(absolute path, path inside the package folder) of every file every package ships,
+    sorted: the csm_engine package with its data, the top-level shaders/ as the package's
+    shaders/, and LICENSE at its root."""
+    package_dir = os.path.join(root, PACKAGE_NAME)
+    shaders_dir = os.path.join(root, SHADERS_DIR)
+    if not os.path.isfile(os.path.join(package_dir, "__init__.py")):
+        raise BuildError(f"{package_dir}/__init__.py is missing")
+    # A checkout keeps the GLSL in one place only: two copies would both go into the
+    # archives under one name.
+    stray = os.path.join(package_dir, SHADERS_DIR)
+    if os.path.exists(stray):
+        raise BuildError(f"{stray} exists: the GLSL lives in the top-level {SHADERS_DIR}/ "
+                         "(move any edits there and delete that folder)")
+    files = _walk(package_dir, "") + _walk(shaders_dir, SHADERS_DIR)
+    shipped = {relative for _, relative in files}
+    for resource in REQUIRED_RESOURCES:
+        if resource.replace(os.sep, "/") not in shipped:
+            top = root if resource.startswith(SHADERS_DIR) else package_dir
+            raise BuildError(f"{os.path.join(top, resource)} is missing")
+    # The GPL asks for its text to travel with the code.
+    license_path = os.path.join(root, "LICENSE")
+    if not os.path.isfile(license_path):
+        raise BuildError(f"{license_path} is missing (the manifest declares GPL-3.0-or-later)")
+    files.append((license_path, "LICENSE"))
     return sorted(files, key=lambda item: item[1])
 
 
@@ -314,8 +337,9 @@ def build_sdist(sdist_directory, config_settings=None):
     project = read_project()
     version = check_versions_agree(read_manifest())
     base = f"{distribution_name(project)}-{version}"
-    files = [(path, f"{PACKAGE_NAME}/{relative}") for path, relative in package_files()
-             if relative != "LICENSE"]
+    # The checkout's own layout (shaders/ at the top), from which build_wheel runs again.
+    files = [(path, os.path.relpath(path, REPO_ROOT).replace(os.sep, "/"))
+             for path, relative in package_files() if relative != "LICENSE"]
     for name in ("LICENSE", "pyproject.toml", "blender_manifest.toml", project.get("readme"),
                  os.path.join("tools", "build.py")):
         if name:

@@ -94,8 +94,9 @@ object (or the most recent import)"""
 
 
 class CSM_OT_reload_shaders(bpy.types.Operator):
-    """Recompile all CSM shaders from the shaders/ folder. On a GLSL error the last good \
-shaders keep running and the error (file:line) is shown"""
+    """Recompile all CSM shaders from the shaders/ folder the add-on reads (a checkout's \
+own, or the installed copy). On a GLSL error the last good shaders keep running and the \
+error (file:line) is shown"""
     bl_idname = "csm.reload_shaders"
     bl_label = "Reload CSM Shaders"
     bl_options = {'REGISTER'}
@@ -109,7 +110,8 @@ shaders keep running and the error (file:line) is shown"""
             # ShaderLibrary.reload already printed it to the console.
             self.report({'ERROR'}, f"{error} (keeping the previous shaders)")
             return {'CANCELLED'}
-        self.report({'INFO'}, "CSM shaders reloaded")
+        # Where the files came from: the running add-on's own folder (core/paths.py).
+        self.report({'INFO'}, f"CSM shaders reloaded from {library.folder}")
         return {'FINISHED'}
 
 

@@ -1,13 +1,23 @@
 """Where the add-on's resource folders live.
 
-Owns the lookup of ``shaders/`` and ``data/``. Both sit inside the package, in a source
-checkout and in every installed form (extension, legacy add-on, pip), so one lookup serves
-them all.
+Owns the lookup of the GLSL library (``shaders/``) and the bundled data (``data/``).
+
+``data/`` sits inside the package everywhere. The GLSL lives in the repository's top-level
+``shaders/``, beside the package, in a source checkout; every installed form (extension,
+legacy add-on, wheel) carries it inside the package as ``csm_engine/shaders/``, because
+Blender and pip install one folder. ``shaders_dir`` looks inside the package first, so an
+installed add-on always reads (and F5 reloads) its own installed copy, and a checkout reads
+the top-level folder it is edited in.
 """
 
 import os
 
 PACKAGE_DIR = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+# The repository root of a source checkout (or whatever folder holds an installed package).
+CHECKOUT_DIR = os.path.dirname(PACKAGE_DIR)
+# A file every GLSL library holds: a folder without it is not ours (a stray ``shaders/``
+# next to an installed package, say).
+SHADER_MARKER = "lighting_frag.glsl"
 
 
 def _resource_dir(name):
@@ -17,8 +27,20 @@ def _resource_dir(name):
     return path
 
 
+def shader_dir_candidates():
+    """The folders ``shaders_dir`` considers, in order: the installed copy inside the
+    package, then a checkout's top-level ``shaders/``."""
+    return (os.path.join(PACKAGE_DIR, "shaders"), os.path.join(CHECKOUT_DIR, "shaders"))
+
+
 def shaders_dir():
-    return _resource_dir("shaders")
+    """The folder the running add-on reads its GLSL from (and F5 reloads)."""
+    candidates = shader_dir_candidates()
+    for path in candidates:
+        if os.path.isfile(os.path.join(path, SHADER_MARKER)):
+            return path
+    raise FileNotFoundError("CSM Engine: the GLSL library (shaders/ with "
+                            f"{SHADER_MARKER}) is in neither {' nor '.join(candidates)}")
 
 
 def data_dir():

@@ -1,9 +1,12 @@
 """GLSL programs: loading from ``shaders/``, includes, uniform-block layouts, hot reload.
 
-Owns every ``gpu.types.GPUShader`` the pipeline uses. GLSL lives as real files in
-``shaders/``; ``#include "file.glsl"`` is resolved here (create-info has no include
-mechanism), and each included file gets its own ``#line N id`` so compiler messages can be
-mapped back to ``file.glsl:line``.
+Owns every ``gpu.types.GPUShader`` the pipeline uses. GLSL lives as real files in the
+GLSL library ``shaders/`` (the repository's top-level folder in a checkout, the package's
+own copy once installed: ``core/paths.py`` finds it). A program names its two stage files;
+the library's topical files (shadow filters, cascade selection, BRDF, debug views...) are
+pulled in by ``#include "file.glsl"``, resolved here (create-info has no include
+mechanism): each file at most once per stage, and each with its own block of line numbers
+so compiler messages can be mapped back to ``file.glsl:line``.
 
 The frame uniform block is described once, in ``core/frame_layout.py`` (``FRAME_LAYOUT``),
 which generates both the std140 GLSL structs and the numpy packing, so the two can never
@@ -157,7 +160,7 @@ PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_normal"),
                            defines=(("AO_BLUR", "1"),))
 PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),)
 
-# One lighting program per Shadow Filter setting (SHADOW_FILTER, see common.glsl): the
+# One lighting program per Shadow Filter setting (SHADOW_FILTER, see shadow_lookup.glsl): the
 # plain "lighting" is PCF. Each has "_points" and "_spots" twins with the point- and
 # spot-light loops (POINT_LIGHTS, SPOT_LIGHTS), used when the scene has such lights:
 # llvmpipe pays for a loop's first pass even when it runs no times.
@@ -192,10 +195,26 @@ class ShaderCompileError(Exception):
 LINES_PER_FILE = 10000
 
 
-def _expand_includes(name, directory, file_ids, depth=0):
-    """Return ``name``'s source with includes inlined and ``#line`` markers for mapping."""
+# Preprocessor lines that may leave a conditional group: the lines after them get their
+# number again (see _expand_includes).
+_CONDITIONAL_END = re.compile(r"^\s*#\s*(else|elif|endif)\b")
+
+
+def _expand_includes(name, directory, file_ids, depth=0, included=None):
+    """Return ``name``'s source with includes inlined and ``#line`` markers for mapping.
+
+    The GLSL library's files include what they use, so one file may be asked for twice
+    (the shadow filters and the debug views both read the atlas): each file is inlined
+    once per stage (``included``), later requests give nothing. After every ``#else``,
+    ``#elif`` and ``#endif`` the file's own line number is set again, because a ``#line``
+    inside a group the preprocessor skips is skipped too, while the skipped lines still
+    count."""
     if depth > 8:
         raise ShaderCompileError(f"{name}: #include nested too deeply (a cycle?)")
+    included = set() if included is None else included
+    if name in included:
+        return ""
+    included.add(name)
     path = os.path.join(directory, name)
     try:
         with open(path, encoding="utf-8") as handle:
@@ -212,10 +231,13 @@ def _expand_includes(name, directory, file_ids, depth=0):
     for number, line in enumerate(text.splitlines(), start=1):
         match = _INCLUDE.match(line)
         if match:
-            out.append(_expand_includes(match.group(1), directory, file_ids, depth + 1))
+            out.append(_expand_includes(match.group(1), directory, file_ids, depth + 1,
+                                        included))
             out.append(f"#line {base + number + 1}")
         else:
             out.append(line)
+            if _CONDITIONAL_END.match(line):
+                out.append(f"#line {base + number + 1}")
     return "\n".join(out) + "\n"
 
 
@@ -354,8 +376,14 @@ class ShaderLibrary:
         except (AttributeError, TypeError):   # interpreter shutdown
             pass
 
+    @property
+    def folder(self):
+        """The folder the programs are (re)compiled from: the one given, else the running
+        add-on's own GLSL library (a checkout's shaders/, or the installed copy)."""
+        return self.directory or paths.shaders_dir()
+
     def _compile_all(self):
-        directory = self.directory or paths.shaders_dir()
+        directory = self.folder
         compiled = {}
         try:
             for name, spec in PROGRAMS.items():

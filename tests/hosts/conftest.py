@@ -123,12 +123,14 @@ def script_command(host, script, *args):
 
 
 def copy_package(work):
-    """A copy of the checkout's ``csm_engine`` package (shaders and data inside) in
-    ``work``, for host scripts that put ``work`` on sys.path; returns its path."""
+    """A copy of the checkout's ``csm_engine`` package (data inside) and of its GLSL
+    library ``shaders/`` beside it, as in the checkout, in ``work``, for host scripts that
+    put ``work`` on sys.path; returns the package's path."""
     import shutil
     target = os.path.join(str(work), "csm_engine")
     shutil.copytree(os.path.join(REPO, "csm_engine"), target,
                     ignore=shutil.ignore_patterns("__pycache__"))
+    shutil.copytree(os.path.join(REPO, "shaders"), os.path.join(str(work), "shaders"))
     return target
 
 

@@ -1,11 +1,13 @@
 """The packages from tools/build.py install and work the way a user would use them.
 
 * Every package (extension zip, legacy zip, wheel) carries the whole ``csm_engine``
-  package with its ``shaders/`` and ``data/``, and LICENSE; none carries a measuring
+  package with its ``data/``, the repository's top-level GLSL library ``shaders/`` inside
+  the package (as ``csm_engine/shaders/``), and LICENSE; none carries a measuring
   tool (benchmark, model fetching, ground truth, quality report) or starts processes.
 * The extension zip passes Blender's own validator, then installs through
   ``extensions.package_install_files`` and enables in pip bpy 5.0 and pip bpy 4.2: CSM is
-  then a render engine a scene can use, and it renders a lit cube from the installed copy.
+  then a render engine a scene can use, and it renders a lit cube from the installed copy;
+  F5 (Reload Shaders) reloads the installed copy of the shaders.
 * The legacy zip installs through ``preferences.addon_install`` + ``addon_enable`` in
   Debian's Blender 3.4, and ``blender -b file.blend -E CSM -f 1`` renders the default
   scene with the add-on enabled from the saved preferences.
@@ -32,6 +34,7 @@ import pytest
 pytestmark = pytest.mark.hosts
 
 from tests.conftest import PACKAGE, REPO
+SHADERS = os.path.join(REPO, "shaders")
 RENDER_SIZE = (160, 120)
 # A pixel counts as lit when the sun adds at least this much to its luminance (0..1 PNG).
 LIT_THRESHOLD = 0.05
@@ -76,16 +79,30 @@ def archives(tmp_path_factory):
     return paths
 
 
-def _source_files():
-    """What every package must carry, relative to the package folder: all of csm_engine
-    (code, shaders/, data/) and LICENSE."""
-    files = {"LICENSE"}
-    for folder, dirs, names in os.walk(PACKAGE):
+def _files_under(top, inside=""):
+    files = set()
+    for folder, dirs, names in os.walk(top):
         dirs[:] = [d for d in dirs if d != "__pycache__" and not d.startswith(".")]
         for name in names:
             if not name.startswith(".") and not name.endswith((".pyc", "~")):
-                files.add(os.path.relpath(os.path.join(folder, name), PACKAGE).replace(os.sep, "/"))
+                relative = os.path.relpath(os.path.join(folder, name), top).replace(os.sep, "/")
+                files.add(inside + relative)
     return files
+
+
+def _shader_files():
+    """The checkout's GLSL library as every package carries it: inside the package."""
+    files = _files_under(SHADERS, "shaders/")
+    assert "shaders/lighting_frag.glsl" in files and len(files) >= 10, sorted(files)
+    return files
+
+
+def _source_files():
+    """What every package must carry, relative to the package folder: all of csm_engine
+    (code, data/), the top-level shaders/ as the package's shaders/, and LICENSE."""
+    assert not os.path.exists(os.path.join(PACKAGE, "shaders")), (
+        "the GLSL lives in the top-level shaders/, not in csm_engine/shaders/")
+    return {"LICENSE"} | _files_under(PACKAGE) | _shader_files()
 
 
 def _bl_info():
@@ -107,7 +124,7 @@ def test_extension_zip_has_the_package_at_its_root_with_shaders_and_data(archive
     assert not missing, f"extension zip lacks {sorted(missing)}"
     assert "blender_manifest.toml" in names
     assert "scenes/default.json" not in names and "data/scenes/default.json" in names
-    assert "shaders/common.glsl" in names and "core/paths.py" in names
+    assert _shader_files() <= names and "core/paths.py" in names
     stray = [n for n in names if "__pycache__" in n or n.endswith(".pyc") or n.startswith("tests/")]
     assert not stray, f"extension zip carries build droppings: {stray}"
 
@@ -117,6 +134,7 @@ def test_legacy_zip_is_one_csm_engine_folder_with_shaders_and_data(archives):
     expected = {"csm_engine/" + name for name in _source_files()}
     missing = expected - names
     assert not missing, f"legacy zip lacks {sorted(missing)}"
+    assert {"csm_engine/" + name for name in _shader_files()} <= names
     outside = [n for n in names if not n.startswith("csm_engine/")]
     assert not outside, f"legacy zip has files outside csm_engine/: {outside}"
     stray = [n for n in names if "__pycache__" in n or n.endswith(".pyc")]
@@ -131,6 +149,7 @@ def test_wheel_has_the_package_with_shaders_data_and_a_csm_render_command(archiv
         expected = {"csm_engine/" + n for n in _source_files() if n != "LICENSE"}
         missing = expected - names
         assert not missing, f"wheel lacks {sorted(missing)}"
+        assert {"csm_engine/" + name for name in _shader_files()} <= names
         outside = [n for n in names if not n.startswith(("csm_engine/", info + "/"))]
         assert not outside, f"wheel has files outside csm_engine/ and {info}/: {outside}"
         assert {f"{info}/{n}" for n in ("METADATA", "WHEEL", "RECORD", "entry_points.txt",
@@ -257,7 +276,7 @@ def test_extension_zip_passes_blenders_validator(archives, hosts):
 
 def _copy_checkout(target):
     """The parts of the checkout that tools/build.py reads, in a folder of another name."""
-    for name in ("tools", "csm_engine"):
+    for name in ("tools", "csm_engine", "shaders"):
         shutil.copytree(os.path.join(REPO, name), os.path.join(target, name),
                         ignore=shutil.ignore_patterns("__pycache__"))
     for name in ("blender_manifest.toml", "LICENSE", "pyproject.toml", "README.md"):
@@ -307,6 +326,49 @@ def test_build_refuses_to_ship_without_the_license_or_with_two_versions(tmp_path
     result = _run_build(str(clone), str(clone / "dist"))
     assert result.returncode == 1
     assert "version mismatch" in result.stderr and "Traceback" not in result.stderr, result.stderr
+
+
+def test_build_ships_the_top_level_shaders_and_refuses_a_second_or_missing_copy(tmp_path):
+    clone = tmp_path / "two copies"
+    _copy_checkout(str(clone))
+    shutil.copytree(clone / "shaders", clone / "csm_engine" / "shaders")
+    result = _run_build(str(clone), str(clone / "dist"))
+    assert result.returncode == 1
+    assert "csm_engine/shaders exists" in result.stderr and "Traceback" not in result.stderr, \
+        result.stderr
+    shutil.rmtree(clone / "csm_engine" / "shaders")
+    shutil.rmtree(clone / "shaders")
+    result = _run_build(str(clone), str(clone / "dist"))
+    assert result.returncode == 1
+    assert "shaders/lighting_frag.glsl is missing" in result.stderr, result.stderr
+    assert not any(os.path.isfile(p) for p in _package_paths(str(clone / "dist"), "0.1.0"))
+
+
+def test_the_sdist_keeps_the_checkout_layout_and_builds_the_same_wheel(archives, tmp_path):
+    """pip builds from an sdist too: it has shaders/ at the top as the checkout does, and
+    the backend inside it makes the very wheel tools/build.py makes."""
+    import tarfile
+    command = [sys.executable, "-c", "import sys, build; print(build.build_sdist(sys.argv[1]))",
+               str(tmp_path)]
+    made = subprocess.run(command, cwd=os.path.join(REPO, "tools"), capture_output=True,
+                          text=True, timeout=300)
+    assert made.returncode == 0, made.stderr
+    with tarfile.open(tmp_path / made.stdout.strip()) as archive:
+        archive.extractall(tmp_path / "sdist", filter="data")
+    (root,) = (tmp_path / "sdist").iterdir()
+    assert {"shaders/" + n.split("/", 1)[1] for n in _shader_files()} == {
+        f"shaders/{p.name}" for p in (root / "shaders").iterdir()}
+    assert not (root / "csm_engine" / "shaders").exists()
+    command = [sys.executable, "-c", "import sys, build; print(build.build_wheel(sys.argv[1]))",
+               str(tmp_path / "wheel")]
+    made = subprocess.run(command, cwd=str(root / "tools"), capture_output=True, text=True,
+                          timeout=300)
+    assert made.returncode == 0, made.stderr
+    with zipfile.ZipFile(archives[2]) as a, \
+            zipfile.ZipFile(tmp_path / "wheel" / made.stdout.strip()) as b:
+        assert sorted(a.namelist()) == sorted(b.namelist())
+        for name in a.namelist():
+            assert a.read(name) == b.read(name), f"{name} differs between the wheels"
 
 
 # --- pip bpy hosts: install the extension and render with it -----------------------------
@@ -374,6 +436,34 @@ try:
         result[name + "_png"] = scene.render.filepath
 except Exception as error:
     result["render_error"] = "%%s: %%s" %% (type(error).__name__, error)
+
+# F5 in the installed add-on: it reloads the installed copy of the shaders. A broken line
+# there is reported with its file and line, and the fix picked up by the next F5.
+def reload_shaders():
+    try:
+        return sorted(bpy.ops.csm.reload_shaders())
+    except RuntimeError as error:   # bpy.ops raises on an ERROR report
+        return str(error)
+
+try:
+    if package is not None:
+        library = importlib.import_module(package.__name__ + ".render.shaders").LIBRARY
+        result["f5_folder"] = library.folder
+        result["f5"] = reload_shaders()
+        lighting = os.path.join(library.folder, "lighting_frag.glsl")
+        with open(lighting, encoding="utf-8") as handle:
+            good = handle.read()
+        lines = good.splitlines()
+        result["f5_broken_line"] = lines.index("{") + 2
+        lines.insert(result["f5_broken_line"] - 1, "  float broken = ;")
+        with open(lighting, "w", encoding="utf-8") as handle:
+            handle.write("\n".join(lines) + "\n")
+        result["f5_broken"] = reload_shaders()
+        with open(lighting, "w", encoding="utf-8") as handle:
+            handle.write(good)
+        result["f5_fixed"] = reload_shaders()
+except Exception as error:
+    result["f5_error"] = "%%s: %%s" %% (type(error).__name__, error)
 print("CSM_RESULT " + json.dumps(result), flush=True)
 ''' % {"width": RENDER_SIZE[0], "height": RENDER_SIZE[1]}
 
@@ -412,6 +502,13 @@ def _install_extension_and_render(python, archives, host_dir, hosts, what):
     assert "render_error" not in result, f"{what}: render failed: {result['render_error']}\n{run.describe()}"
     assert result["scene_engine"] == "CSM"
     _assert_sun_lights_the_frame(result["lit_png"], result["unlit_png"], hosts, what)
+    # F5 reloads the installed copy: it reports a line broken there, then picks up the fix.
+    assert "f5_error" not in result, f"{what}: F5 failed: {result['f5_error']}\n{run.describe()}"
+    assert result["f5_folder"] == result["shaders_dir"], result
+    assert result["f5"] == ["FINISHED"], result
+    assert f"lighting_frag.glsl:{result['f5_broken_line']}" in result["f5_broken"], result
+    assert "keeping the previous shaders" in result["f5_broken"], result
+    assert result["f5_fixed"] == ["FINISHED"], result
     return result
 
 

@@ -4,8 +4,9 @@ Blender 3.4 and pip bpy 4.2 drop the location from their own compiler log, so th
 message comes from csm_engine/shader_diagnostics.py recompiling through raw GL. Each host
 runs a script in a subprocess: a tiny RenderEngine with ``bl_use_gpu_context`` renders one
 frame and, inside it, reloads a ShaderLibrary over a copy of ``shaders/`` with one broken
-line (in lighting_frag.glsl, and in the included common.glsl). The package is copied from
-this checkout into the host's working folder, so no install is needed.
+line (in lighting_frag.glsl, in an included file, after a conditional include). The package and the GLSL library are
+copied from this checkout into the host's working folder (``shaders/`` beside
+``csm_engine/``, as in the checkout), so no install is needed.
 """
 
 import json
@@ -16,9 +17,13 @@ import pytest
 pytestmark = pytest.mark.hosts
 
 
+# A program's own file, a file two includes deep (lighting_frag.glsl -> shadow_lookup.glsl
+# -> shadow_soft.glsl), a semantic error, and a line after an #ifdef'd #include (whose
+# skipped #line markers must not shift the numbers after #endif).
 CASES = (("lighting_frag.glsl", "  float broken = ;"),
-         ("common.glsl", "  float broken = ;"),
-         ("lighting_frag.glsl", "  float broken = nope;"))
+         ("shadow_soft.glsl", "  float broken = ;"),
+         ("lighting_frag.glsl", "  float broken = nope;"),
+         ("shadow_frag.glsl", "  float broken = ;"))
 
 # Runs inside the host. argv (after "--" for blender): working folder. Prints CSM_RESULT.
 HOST_SCRIPT = r'''
@@ -52,11 +57,11 @@ class ErrorProbe(bpy.types.RenderEngine):
     def render(self, depsgraph):
         for index, (name, broken) in enumerate(CASES):
             directory = os.path.join(work, f"case{index}", "shaders")
-            shutil.copytree(os.path.join(work, "csm_engine", "shaders"), directory)
+            shutil.copytree(os.path.join(work, "shaders"), directory)
             line = break_shader(directory, name, broken)
             message = shaders.ShaderLibrary(directory=directory).reload()
             result["cases"].append({"file": name, "line": line, "message": message})
-        good = shaders.ShaderLibrary(directory=os.path.join(work, "csm_engine", "shaders"))
+        good = shaders.ShaderLibrary(directory=os.path.join(work, "shaders"))
         result["good"] = good.reload()
         del good        # free the GPU shaders while their context is still current
         self.end_result(self.begin_result(0, 0, 4, 4))

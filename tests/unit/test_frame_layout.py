@@ -8,13 +8,13 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from csm_engine.core import cascades, frame_layout, settings_model
+from csm_engine.core import cascades, frame_layout, paths, settings_model
 from csm_engine.core.frame import PointLight, SpotLight, Sun, spot_cone_cosines
 from csm_engine.core.frame_layout import FRAME_LAYOUT, UniformLayout, glsl_defines
 from csm_engine.core.shadow_plan import WINDOW_FROM_CLIP, ShadowPlan, ShadowTile, pack_frame
 
 PACKAGE = Path(frame_layout.__file__).resolve().parents[1]
-SHADERS = sorted((PACKAGE / "shaders").glob("*.glsl"))
+SHADERS = sorted(Path(paths.shaders_dir()).glob("*.glsl"))
 
 INNER = UniformLayout("Inner", (
     ("a", "vec3", "a vec3"),

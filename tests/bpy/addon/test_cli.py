@@ -178,7 +178,8 @@ def test_a_failed_render_is_one_line_exit_4_and_no_file(tmp_path):
     package = tmp_path / "pkg"
     shutil.copytree(os.path.join(REPO, "csm_engine"), package / "csm_engine",
                     ignore=shutil.ignore_patterns("__pycache__"))
-    lighting = package / "csm_engine" / "shaders" / "lighting_frag.glsl"
+    shutil.copytree(os.path.join(REPO, "shaders"), package / "shaders")
+    lighting = package / "shaders" / "lighting_frag.glsl"
     lighting.write_bytes(lighting.read_bytes().replace(b"/*", b"/* \xff", 1))
     shot = tmp_path / "never.png"
     env = dict(os.environ, PYTHONPATH=str(package))

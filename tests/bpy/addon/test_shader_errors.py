@@ -1,10 +1,14 @@
 """A GLSL compile error names ``file.glsl:line`` of the line that is wrong (pip bpy 5.0).
 
-The broken line is put into a copy of ``shaders/``, inside a function body, both in a
-program's own file (lighting_frag.glsl) and in a file it includes (common.glsl), and the
-message of ``ShaderLibrary.reload`` (what F5 reports) must name exactly that file and line.
-Blender 3.4 and pip bpy 4.2 run the same check in tests/hosts/test_shader_errors_hosts.py.
+The broken line is put into a copy of ``shaders/``, inside a function body, in a program's
+own file (lighting_frag.glsl), in every file of the GLSL library that a program includes,
+and after a conditional include (shadow_frag.glsl), and the message of
+``ShaderLibrary.reload`` (what F5 reports) must name exactly that file and line. Blender 3.4
+and pip bpy 4.2 run the same check in tests/hosts/test_shader_errors_hosts.py. F5 in a
+checkout reads the top-level ``shaders/`` (the installed add-on's copy is checked in
+tests/hosts/test_packaging.py).
 """
+import os
 import re
 import shutil
 
@@ -12,10 +16,22 @@ import bpy
 import pytest
 
 from tests.bpy.bpy_helpers import render_scene
+from tests.conftest import REPO
 from csm_engine.core import paths
 from csm_engine.render import shaders
 
 BROKEN = "  float broken = ;"
+INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"', re.MULTILINE)
+
+
+def included_files():
+    """Every file of the GLSL library that some shader file includes."""
+    names = set()
+    for path in sorted(os.listdir(paths.shaders_dir())):
+        if path.endswith(".glsl"):
+            with open(os.path.join(paths.shaders_dir(), path), encoding="utf-8") as handle:
+                names.update(INCLUDE.findall(handle.read()))
+    return sorted(names)
 
 
 def break_shader(directory, name, broken=BROKEN):
@@ -28,11 +44,17 @@ def break_shader(directory, name, broken=BROKEN):
     return line
 
 
+def test_the_library_has_the_files_the_lighting_pass_is_made_of():
+    assert {"shadow_atlas.glsl", "shadow_pcf.glsl", "shadow_soft.glsl", "shadow_lookup.glsl",
+            "cascade_selection.glsl", "brdf.glsl", "lights.glsl", "debug_views.glsl",
+            "alpha_hash.glsl"} <= set(included_files())
+
+
 @pytest.mark.parametrize("name, broken", [
     ("lighting_frag.glsl", BROKEN),                       # syntax error in the program's file
-    ("common.glsl", BROKEN),                              # ... in an included file
     ("lighting_frag.glsl", "  float broken = nope;"),     # undeclared name (semantic error)
-])
+    ("shadow_frag.glsl", BROKEN),                         # after an #ifdef'd #include
+] + [(name, BROKEN) for name in included_files()])        # ... in every included file
 def test_compile_error_names_file_and_line(empty_scene, tmp_path, name, broken):
     camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
     empty_scene.collection.objects.link(camera)
@@ -55,9 +77,38 @@ def test_a_shader_file_that_is_not_utf8_is_a_clean_error(empty_scene, tmp_path):
     render_scene(empty_scene, 16, 16)
     directory = tmp_path / "shaders"
     shutil.copytree(paths.shaders_dir(), directory)
-    path = directory / "common.glsl"
+    path = directory / "shadow_atlas.glsl"
     path.write_bytes(path.read_bytes().replace(b"/*", b"/* caf\xe9 ", 1))
     library = shaders.ShaderLibrary(directory=str(directory))
     message = library.reload()
-    assert message == "common.glsl:1: not UTF-8 text (byte 0xe9); save the file as UTF-8", \
+    assert message == "shadow_atlas.glsl:1: not UTF-8 text (byte 0xe9); save the file as UTF-8", \
         message
+
+
+def test_f5_in_a_checkout_reads_the_top_level_shaders_folder(empty_scene, tmp_path,
+                                                             monkeypatch):
+    """A checkout has no csm_engine/shaders/: the add-on reads (and F5 reloads) the
+    repository's shaders/ beside the package. Shown on a copy of the checkout's layout, so
+    the edit F5 must pick up is made in a copy, never in the checkout."""
+    assert not os.path.exists(os.path.join(paths.PACKAGE_DIR, "shaders"))
+    assert paths.shaders_dir() == os.path.join(REPO, "shaders")
+    assert shaders.LIBRARY.folder == paths.shaders_dir()
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    empty_scene.collection.objects.link(camera)
+    empty_scene.camera = camera
+    render_scene(empty_scene, 16, 16)          # makes sure a GPU context exists
+    checkout = tmp_path / "checkout"
+    shutil.copytree(paths.shaders_dir(), checkout / "shaders")
+    monkeypatch.setattr(paths, "CHECKOUT_DIR", str(checkout))
+    library = shaders.ShaderLibrary()
+    monkeypatch.setattr(shaders, "LIBRARY", library)
+    assert library.folder == str(checkout / "shaders")
+    line = break_shader(checkout / "shaders", "lighting_frag.glsl")
+    with pytest.raises(RuntimeError) as failure:    # bpy.ops raises on an ERROR report
+        bpy.ops.csm.reload_shaders()
+    assert f"lighting_frag.glsl:{line}" in str(failure.value), str(failure.value)
+    shutil.copy2(os.path.join(REPO, "shaders", "lighting_frag.glsl"),
+                 checkout / "shaders" / "lighting_frag.glsl")
+    generation = library.generation
+    assert bpy.ops.csm.reload_shaders() == {'FINISHED'}
+    assert library.last_error is None and library.generation == generation + 1

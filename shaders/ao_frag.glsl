@@ -13,11 +13,10 @@
  * result, which removes its 4x4 pattern. A neighbour counts only when its surface point
  * lies on the pixel's tangent plane (within a few pixel footprints), so occlusion does not
  * bleed across silhouettes and a grazing plane still blurs along itself. The lighting pass
- * brings it to full resolution (ambient_occlusion_at in lighting_frag.glsl).
+ * brings it to full resolution (ambient_occlusion_at in ao_upsample.glsl).
  *
- * NOTE: until the sixth session (2026-11-23) the blur ran at full resolution: 16
- * neighbours for each of 4x as many pixels made it the larger half of the AO's cost on
- * llvmpipe.
+ * NOTE: the blur runs at half resolution because at full resolution its 16 neighbours
+ * for each of 4x as many pixels made it the larger half of the AO's cost on llvmpipe.
  *
  * Inputs: the G-buffer's view depth (0 = background) and world normal. Both programs
  * write (AO, the view depth of the full-resolution pixel the value stands for), so the

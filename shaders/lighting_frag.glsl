@@ -1,0 +1,196 @@
+/* Deferred lighting pass: ambient + sun (with cascaded shadows) + point + spot lights +
+ * emission, and every debug view. Writes scene-linear colour (Blender applies the view
+ * transform) and an auxiliary target: sun visibility, cascade index, view depth, coverage.
+ *
+ * One program per Shadow Filter (SHADOW_FILTER), each with twins that have the point-light
+ * loop (POINT_LIGHTS), the shadowed point lights (POINT_SHADOWS), the spot-light loop
+ * (SPOT_LIGHTS) and the debug views (WITH_DEBUG_VIEWS) (render/shaders.py): llvmpipe pays
+ * for code it skips, so a program holds only what its scene uses. */
+#include "surface.glsl"
+#include "brdf.glsl"
+#include "lights.glsl"
+#include "ao_upsample.glsl"
+#include "shadow_lookup.glsl"
+#include "cascade_selection.glsl"
+#include "terminator.glsl"
+#include "debug_views.glsl"
+
+/* Outgoing radiance of surface s for an irradiance of one from direction l (surface_brdf). */
+vec3 surface_response(Surface s, vec3 l)
+{
+  return surface_brdf(s.albedo, s.metallic, s.specular, s.shininess, s.normal, l, s.to_camera);
+}
+
+/* The World's light on surface s, darkened by ambient occlusion (its share of the light
+ * reaching s in `visibility`). */
+vec3 ambient_light(Surface s, ivec2 px, out float visibility)
+{
+  /* A uniform World of radiance L: irradiance pi * L times the Lambert BRDF albedo / pi. */
+  vec3 color = frame.ambient_color * s.albedo;
+  /* Ambient occlusion darkens only this term, as in EEVEE: direct light has its shadows. */
+  visibility = frame.ao_enabled != 0 ?
+      mix(1.0, ambient_occlusion_at(px, s.view_depth, s.depth_slope), frame.ao_strength) : 1.0;
+  return color * visibility;
+}
+
+/* Adds the sun's light on surface s to `color`, through its cascaded shadow maps. Returns
+ * what the lookups found: the sun's visibility (1 lit, 0 shadowed), the cascade read
+ * (fractional inside a blend band, -1 for none) and the first shadow tile read (-1 beyond
+ * the last cascade). May turn s.shadow_normal (see terminator_lookup_point). */
+void add_sun(inout Surface s, inout vec3 color, out float visibility, out float cascade,
+             out int sun_tile)
+{
+  /* The sun's cascade, and the next one's weight inside a blend band. */
+  bool sun_shadowed = frame.has_sun != 0 && frame.sun_casts_shadow != 0;
+  vec3 sun_l = normalize(frame.sun_direction);
+  float sun_n_dot_l = dot(s.normal, sun_l);
+  float next_weight;
+  sun_tile = sun_cascade(s.view_depth, next_weight);
+  int second_tile = sun_tile + 1;
+  /* Cascade Selection: Shadow Map. A finer map than the slice's own may hold the point
+   * (a fitted map reaches past its split): read the finest that does, with room for the
+   * filter's taps and the normal offset. */
+  if (frame.cascade_selection == SELECT_MAP && frame.has_sun != 0 && sun_tile >= 0) {
+    sun_tile = sun_cascade_by_map(s.position, sun_tile, shadow_filter_reach_texels(),
+                                  second_tile, next_weight);
+  }
+  cascade = sun_shadowed ? float(sun_tile) : -1.0;
+  /* Facing away from the sun: in its own shadow, whatever the map says (and no taps to
+   * pay for). */
+  float sun_vis = (sun_shadowed && sun_n_dot_l <= 0.0) ? 0.0 : 1.0;
+  int sun_lookups = (sun_shadowed && sun_tile >= 0 && sun_n_dot_l > 0.0) ?
+                    (next_weight > 0.0 ? 2 : 1) : 0;
+
+  /* NOTE: llvmpipe runs both sides of an `if` (and one pass of any loop) for every pixel,
+   * but leaves a loop once no pixel of its group needs another pass: in this loop a pixel
+   * pays for the next cascade's lookup only where some pixel near it is in a blend band. */
+  float shadow_n_dot_sun = dot(s.shadow_normal, sun_l);
+  vec3 p_sun = terminator_lookup_point(s, sun_n_dot_l, shadow_n_dot_sun);
+  for (int k = 0; k < sun_lookups; k++) {
+    ShadowTileData tile = frame.shadow_tiles[k == 0 ? sun_tile : second_tile];
+    /* Sun cascades are orthographic: said here as a constant, the compiler drops the
+     * perspective code from the lookup (llvmpipe would run it for every pixel). */
+    tile.is_perspective = 0;
+    float vis = shadow_tile_visibility(tile, p_sun, s.shadow_normal, shadow_n_dot_sun,
+                                       frame.sun_tan_half_angle);
+    sun_vis = k == 0 ? vis : mix(sun_vis, vis, next_weight);
+  }
+  if (sun_lookups > 0) {
+    cascade += sun_lookups == 2 ? next_weight * float(second_tile - sun_tile) : 0.0;
+    sun_vis = sun_shadow_fade(sun_vis, s.view_depth);
+  }
+  if (frame.has_sun != 0) {
+    color += frame.sun_color * surface_response(s, sun_l) * sun_vis;
+  }
+  visibility = sun_vis;
+}
+
+/* Adds point lights first..end-1 (at most MAX_POINT_LIGHTS) to `color`. The shadowed
+ * ones (`shadowed`: the first frame.point_shadow_count lights, at most MAX_POINT_SHADOWS)
+ * look up their cube map's face; only the programs built with POINT_SHADOWS have that
+ * lookup. `shadowed` is a constant at each call, so the compiler keeps one loop per call
+ * and no lookup in the unshadowed one. */
+void add_point_light_range(Surface s, int first, int end, const bool shadowed,
+                           inout vec3 color)
+{
+  int limit = shadowed ? MAX_POINT_SHADOWS : MAX_POINT_LIGHTS;
+  for (int i = first; i < limit; i++) {
+    if (i >= end) {
+      break;
+    }
+    PointLightData light = frame.point_lights[i];
+    vec3 l;
+    float attenuation = point_light_at(light, s.position, l);
+    if (attenuation > 0.0) {
+      float vis = 1.0;
+#ifdef POINT_SHADOWS
+      if (shadowed) {
+        int tile = frame.point_shadow_tiles + 6 * i + cube_face(s.position - light.position);
+        vis = shadow_tile_visibility(frame.shadow_tiles[tile], s.position, s.shadow_normal,
+                                     dot(s.shadow_normal, l), light.source_radius);
+      }
+#endif
+      color += light.color * attenuation * vis * surface_response(s, l);
+    }
+  }
+}
+
+/* Adds every point light to `color`: the ones with cube-map shadows come first. */
+void add_point_lights(Surface s, inout vec3 color)
+{
+  int first_unshadowed = 0;
+#ifdef POINT_SHADOWS
+  first_unshadowed = frame.point_shadow_count;
+  add_point_light_range(s, 0, first_unshadowed, true, color);
+#endif
+  add_point_light_range(s, first_unshadowed, frame.point_light_count, false, color);
+}
+
+/* Adds every spot light to `color`, each through its own shadow map where it has one. */
+void add_spot_lights(Surface s, inout vec3 color)
+{
+  int spot_count = frame.spot_light_count;
+  for (int i = 0; i < MAX_SPOT_LIGHTS; i++) {
+    if (i >= spot_count) {
+      break;
+    }
+    SpotLightData spot = frame.spot_lights[i];
+    vec3 l;
+    float attenuation = spot_light_at(spot, s.position, l);
+    if (attenuation > 0.0) {
+      float vis = 1.0;
+      if (spot.shadow_tile >= 0) {
+        vis = shadow_tile_visibility(frame.shadow_tiles[spot.shadow_tile], s.position,
+                                     s.shadow_normal, dot(s.shadow_normal, l),
+                                     spot.source_radius);
+      }
+      color += spot.color * attenuation * vis * surface_response(s, l);
+    }
+  }
+}
+
+void main()
+{
+  vec2 pixel = screen_uv * frame.viewport_size;
+  ivec2 px = ivec2(pixel);
+#ifdef WITH_DEBUG_VIEWS
+  vec3 map_color;
+  if (shadow_map_view(pixel, map_color)) {
+    out_color = vec4(map_color, 1.0);
+    out_aux = vec4(1.0, -1.0, 0.0, 1.0);
+    return;
+  }
+#endif
+
+  float depth = texelFetch(gbuffer_depth, px, 0).r;
+  if (depth <= 0.0) {
+    /* Background: the World colour; alpha 0 with Film > Transparent. */
+    out_color = vec4(frame.background_color, frame.background_alpha);
+    out_aux = vec4(1.0, -1.0, 1e10, 0.0);
+    return;
+  }
+
+  Surface surface = gbuffer_surface(px, screen_uv, depth);
+  float ambient_visibility;
+  vec3 color = ambient_light(surface, px, ambient_visibility);
+  float sun_visibility;
+  float cascade;
+  int sun_tile;
+  add_sun(surface, color, sun_visibility, cascade, sun_tile);
+#ifdef POINT_LIGHTS
+  add_point_lights(surface, color);
+#endif
+#ifdef SPOT_LIGHTS
+  add_spot_lights(surface, color);
+#endif
+  /* Emission (EEVEE's units: radiance added as is): shows in full shadow and without any
+   * light, and no light or ambient term scales it. */
+  color += surface.emission;
+
+#ifdef WITH_DEBUG_VIEWS
+  color = debug_view_color(surface, color, sun_visibility, cascade, sun_tile,
+                           ambient_visibility);
+#endif
+  out_color = vec4(color, 1.0);
+  out_aux = vec4(sun_visibility, cascade, surface.view_depth, 1.0);
+}

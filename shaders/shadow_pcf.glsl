@@ -1,0 +1,78 @@
+/* The PCF shadow filter (Shadow Filter: PCF): a grid of bilinearly weighted taps, or the
+ * cross (5-tap) and nine-tap patterns, PCF Radius texels apart, then PCF Sharpen.
+ * Used by shadow_lookup.glsl in the programs built with SHADOW_FILTER FILTER_PCF. */
+#include "shadow_atlas.glsl"
+
+/* The cross pattern's taps, then the nine-tap pattern's four corners (times the radius). */
+const vec2 TAP_PATTERN_OFFSETS[9] = vec2[](vec2(0.0, 0.0), vec2(1.0, 0.0), vec2(-1.0, 0.0),
+                                       vec2(0.0, 1.0), vec2(0.0, -1.0), vec2(1.0, 1.0),
+                                       vec2(-1.0, 1.0), vec2(1.0, -1.0), vec2(-1.0, -1.0));
+
+/* Visibility (1 lit, 0 shadowed) at atlas-tile position `texel` (texels) of the tile at
+ * atlas texel `origin`, for a receiver at window depth `compare` on a plane sloping by
+ * `depth_per_texel` (see shadow_tap). */
+float pcf_shadow(vec2 origin, float last_texel, vec2 texel, float compare, vec2 depth_per_texel)
+{
+  /* NOTE: llvmpipe runs both sides of every `if` (masked), so the patterns are loops
+   * whose trip counts come from the settings: the pattern not chosen costs one masked
+   * tap (a loop body always runs once), not its whole set. */
+  int radius = int(frame.pcf_radius_texels);
+  int pattern = frame.pcf_pattern;
+  float lit = 0.0;
+  /* Grid: (2r+1)^2 bilinearly weighted taps, gathered as the (2r+2)^2 texels they touch
+   * with separable weights: the same footprint as hard taps, but edges ramp smoothly
+   * instead of in texel-sized stair steps. */
+  int last = (pattern == PCF_GRID && radius > 0) ? 2 * radius + 1 : -1;
+  vec2 corner = texel - 0.5;
+  vec2 base = floor(corner);
+  vec2 f = corner - base;
+#if defined(GPU_ARB_texture_gather) || __VERSION__ >= 400
+  /* Four texels a fetch: textureGather returns the depths of the 2x2 texels around a
+   * texel corner (x: left-top, y: right-top, z: right-bottom, w: left-bottom), so the
+   * (2r+2)^2 texels take (r+1)^2 fetches (on llvmpipe a quarter of the fetch cost). A
+   * block is kept inside the tile, as single taps are clamped to it. */
+  vec2 atlas_step = 1.0 / vec2(textureSize(shadow_atlas, 0));
+  int blocks = (last + 1) / 2;
+  for (int by = 0; by < blocks; by++) {
+    float wy0 = by == 0 ? 1.0 - f.y : 1.0;
+    float wy1 = 2 * by + 1 == last ? f.y : 1.0;
+    for (int bx = 0; bx < blocks; bx++) {
+      float wx0 = bx == 0 ? 1.0 - f.x : 1.0;
+      float wx1 = 2 * bx + 1 == last ? f.x : 1.0;
+      vec2 block = clamp(base + vec2(float(2 * bx - radius), float(2 * by - radius)),
+                         vec2(0.0), vec2(last_texel - 1.0));
+      vec4 stored = textureGather(shadow_atlas, (origin + block + 1.0) * atlas_step);
+      float plane = compare + dot(depth_per_texel, block + 0.5 - texel);
+      vec4 planes = plane + vec4(depth_per_texel.y, depth_per_texel.x + depth_per_texel.y,
+                                 depth_per_texel.x, 0.0);
+      lit += dot(step(planes, stored), vec4(wx0 * wy1, wx1 * wy1, wx1 * wy0, wx0 * wy0));
+    }
+  }
+#else
+  for (int y = 0; y <= last; y++) {
+    float wy = (y == 0) ? 1.0 - f.y : ((y == last) ? f.y : 1.0);
+    for (int x = 0; x <= last; x++) {
+      float wx = (x == 0) ? 1.0 - f.x : ((x == last) ? f.x : 1.0);
+      vec2 center = base + vec2(float(x - radius), float(y - radius)) + 0.5;
+      lit += wx * wy * shadow_tap(origin, last_texel, center, texel, compare, depth_per_texel);
+    }
+  }
+#endif
+  /* Cross (5 taps) and nine-tap (3x3) patterns r texels apart; radius 0 is one hard tap. */
+  int taps = radius == 0 ? 1 : (pattern == PCF_CROSS5 ? 5 : (pattern == PCF_NINE_TAP ? 9 : 0));
+  float r = float(radius);
+  for (int k = 0; k < taps; k++) {
+    lit += shadow_tap(origin, last_texel, texel + r * TAP_PATTERN_OFFSETS[k], texel, compare,
+                      depth_per_texel);
+  }
+  /* PCF Sharpen: steeper around 0.5, so the edge stays where the kernel smoothed it to
+   * (no texel stair steps) while its ramp narrows, and a kernel reaching a little over a
+   * shadow edge or onto a step beside lit ground leaves that ground fully lit (the plain
+   * 3x3 ramp leaves faint stripes along voxel edges). After Unreal's Shadow Filter
+   * Sharpen. Not under an alpha-hashed caster (the atlas's partial-caster mask at this
+   * texel, see shadow_frag.glsl): its shadow is the share of its texels the kernel
+   * finds, which sharpening would threshold away. */
+  float filtered = lit / float(last >= 0 ? (last * last) : taps);
+  float sharpen = partial_caster_at(origin, last_texel, texel) > 0.5 ? 1.0 : frame.pcf_sharpen;
+  return clamp((filtered - 0.5) * sharpen + 0.5, 0.0, 1.0);
+}
