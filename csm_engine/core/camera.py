@@ -212,7 +212,7 @@ class CameraView:
 
 def world_positions(camera, view_depth):
     """(H, W, 3) world positions of pixel centres at the given view depths: the same
-    reconstruction as ``world_position_at`` in lighting_frag.glsl, in float64."""
+    reconstruction as ``world_position_at`` in shaders/surface.glsl, in float64."""
     height, width = view_depth.shape
     x = (np.arange(width) + 0.5) / width * 2.0 - 1.0
     y = (np.arange(height) + 0.5) / height * 2.0 - 1.0

@@ -5,14 +5,15 @@ cascades or Fit to Visible Depth hysteresis.
 Each frame is planned as the pipeline plans it: ``gbuffer_plan`` first, then
 ``plan_shadows`` with the G-buffer's depth blocks, both with the view's state.
 """
+import dataclasses
 import math
-from types import SimpleNamespace
 
 import numpy as np
 
 from csm_engine.core import shadow_plan
 from csm_engine.core.camera import CameraProjection, CameraView
 from csm_engine.core.frame import FrameSnapshot, Sun
+from csm_engine.core.settings_model import default_settings
 from csm_engine.core.view_state import ShadowViewState
 from tests.unit.test_shadow_plan import BOUNDS, SETTINGS
 
@@ -26,7 +27,7 @@ def _snapshot(camera_x=0.0, camera_y=-30.0, scene_name="two_views", **overrides)
     projection = CameraProjection(fov_y=math.radians(50), aspect=WIDTH / HEIGHT,
                                   clip_start=0.1, clip_end=120.0)
     camera = CameraView(world_from_view, projection.clip_from_view(), WIDTH, HEIGHT)
-    settings = SimpleNamespace(**dict(SETTINGS, fit_to_visible=True, **overrides))
+    settings = default_settings(**dict(SETTINGS, fit_to_visible=True, **overrides))
     sun = Sun(to_light=np.array([0.3, -0.2, 0.93]) / np.linalg.norm([0.3, -0.2, 0.93]),
               color=np.ones(3), casts_shadow=True)
     return FrameSnapshot(camera=camera, settings=settings, sun=sun, scene_name=scene_name,
@@ -78,8 +79,7 @@ def _view_b_second_frame(between=None, freeze=False):
 
 
 def _with(snap, **settings):
-    return FrameSnapshot(**{**vars(snap), "settings": SimpleNamespace(
-        **{**vars(snap.settings), **settings})})
+    return dataclasses.replace(snap, settings=dataclasses.replace(snap.settings, **settings))
 
 
 def test_fit_to_visible_hysteresis_is_per_view():

@@ -354,15 +354,15 @@ def test_light_and_scene_groups_are_in_both_panels(empty_scene):
 def test_compiler_logs_of_blender_3_4_4_2_and_5_name_the_glsl_file():
     """Each file owns a block of line numbers, so every log format maps back to file:line."""
     from csm_engine.render import shaders
-    ids = {"lighting_frag.glsl": 1, "common.glsl": 2}
+    ids = {"lighting_frag.glsl": 1, "shadow_atlas.glsl": 2}
     mesa_34 = "0:20017(3): error: syntax error, unexpected ';'"
     # 3.4/4.2 print no location ("      | Error: syntax error"); shader_diagnostics
     # recompiles through raw GL and this is Mesa's line from there, stage-prefixed.
     driver_42 = "fragment: 10171(17): error: syntax error, unexpected ';'"
     blender_5 = "   |       | :20017:17: Error: syntax error, unexpected ';'"
-    assert "common.glsl:17(3): error" in shaders._map_log(mesa_34, ids)
+    assert "shadow_atlas.glsl:17(3): error" in shaders._map_log(mesa_34, ids)
     assert "lighting_frag.glsl:171(17): error" in shaders._map_log(driver_42, ids)
-    assert ":common.glsl:17:17: Error" in shaders._map_log(blender_5, ids)
+    assert ":shadow_atlas.glsl:17:17: Error" in shaders._map_log(blender_5, ids)
     assert shaders._map_log("error at 0.12345 in 99999", ids) == "error at 0.12345 in 99999"
 
 
