@@ -13,7 +13,7 @@ import pytest
 from mathutils import Vector
 
 from tests.bpy.bpy_helpers import render_result, render_scene
-from tests.bpy.engine.test_shadows import add_box, add_camera, add_ground, add_sun, world_bvh
+from tests.bpy.scenes import add_box, add_camera, add_ground, add_sun, world_bvh
 
 WIDTH, HEIGHT = 400, 200
 ORTHO_SCALE = 20.0                      # scene units across the image
