@@ -299,7 +299,7 @@ def test_a_spot_lights_radius_softens_its_shadow(empty_scene):
 @pytest.mark.parametrize("shadow_filter", ['PCF', 'SOFT', 'HARD'])
 @pytest.mark.parametrize("elevation", [5.0, 20.0, 45.0, 89.0])
 def test_fully_lit_flat_ground_is_fully_lit(empty_scene, shadow_filter, elevation):
-    """The issue's target: visibility >= 0.999 on 99.9% of lit flat ground, at any sun
+    """Open flat ground reads fully lit: visibility >= 0.999 on 99.9% of it, at any sun
     height, with default settings (the receiver plane removes the filter's stripes)."""
     scene = empty_scene
     add_ground(400)
