@@ -6,8 +6,10 @@ over a penumbra 2 h tan(a / 2) wide on the ground (h: the plate's height), as Cy
 renders it. The reference is a CPU ray cast, in numpy, from the very ground points the
 G-buffer saw to 2048 points spread evenly over the light's disk (the sun's cone, or the
 cone a sphere light subtends), against the plates' rectangles: the fraction of rays that
-pass is the visibility Cycles converges to. The Shadow pass (sun visibility), or for a spot
-light the lit image over the same image with the shadow off, gives CSM's.
+pass is the visibility Cycles converges to (Cycles, 1024 samples at 200 pixels a metre,
+draws the 1 m plate's edge at 3 and 10 degrees within 0.3 % of the ray cast's penumbra
+width and 0.005 of its visibility). The Shadow pass (sun visibility), or for a spot light
+the lit image over the same image with the shadow off, gives CSM's.
 """
 import math
 
