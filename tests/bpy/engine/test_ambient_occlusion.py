@@ -13,12 +13,10 @@ import os
 import bpy
 import numpy as np
 import pytest
-from csm_tools.report_io import saved_render
 
 from tests.bpy.bpy_helpers import render_result
-from tests.bpy.engine.test_exposure import principled
-from tests.bpy.engine.test_render import set_world_color
-from tests.bpy.engine.test_shadows import add_box, add_camera, add_ground, add_sun
+from tests.bpy.scenes import (add_box, add_camera, add_ground, add_sun, blender_render,
+                              principled, set_world_color)
 
 WORLD = 0.5
 ALBEDO = 0.8                 # Blender's default material base colour
@@ -203,13 +201,13 @@ def test_error_against_cycles_on_a_small_scene(empty_scene, tmp_path):
     csm_ao = result.images["combined"][..., 0]
     covered = result.images["aux"][..., 3] > 0.5
     # Cycles: white World, white diffuse, direct light only = cosine-weighted visibility.
-    scene.render.engine = 'CYCLES'
     cycles = scene.cycles
     cycles.device, cycles.samples, cycles.max_bounces = 'CPU', 256, 0
     cycles.use_denoising = False
     cycles.use_adaptive_sampling = False
     cycles.pixel_filter_type, cycles.filter_width = 'GAUSSIAN', 0.01  # box: 1 px always
-    reference = _render_to_exr(scene, tmp_path)[..., 0]
+    reference = blender_render(scene, 'CYCLES', os.path.join(str(tmp_path), "cycles.exr"))
+    reference = reference[..., 0]
     inner = covered.copy()
     for axis in (0, 1):
         for shift in (1, -1):
@@ -220,12 +218,3 @@ def test_error_against_cycles_on_a_small_scene(empty_scene, tmp_path):
     assert inner.sum() > 0.3 * inner.size
     assert error.mean() < CYCLES_MAE_BOUND
 
-
-def _render_to_exr(scene, folder):
-    """The render result's linear RGBA (rows bottom-up), through a float OpenEXR file (as
-    test_exposure reads EEVEE's)."""
-    try:
-        bpy.ops.render.render()
-    finally:
-        scene.render.engine = "CSM"
-    return saved_render(scene, os.path.join(str(folder), "cycles.exr"))

@@ -17,8 +17,7 @@ import pytest
 from csm_engine.blender import snapshot
 from csm_engine.render import pipeline
 from tests.bpy.bpy_helpers import render_result, render_scene
-from tests.bpy.engine.test_render import set_world_color
-from tests.bpy.engine.test_shadows import add_sun
+from tests.bpy.scenes import add_sun, set_world_color
 
 WIDTH, HEIGHT = 160, 120
 EDGE_ANGLE_DEG = 7.0

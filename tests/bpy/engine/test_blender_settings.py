@@ -9,8 +9,7 @@ import pytest
 
 from csm_engine.blender import engine
 from tests.bpy.bpy_helpers import load_png, render_scene
-from tests.bpy.engine.test_render import set_world_color
-from tests.bpy.engine.test_shadows import add_box, add_camera, add_ground, add_sun
+from tests.bpy.scenes import add_box, add_camera, add_ground, add_sun, set_world_color
 
 WIDTH, HEIGHT = 160, 120
 

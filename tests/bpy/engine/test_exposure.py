@@ -4,8 +4,8 @@ Each case renders one scene with both engines, shadows off on every light, one E
 sample, no AO or bloom, the Standard view transform and an opaque film, and compares the
 mean linear brightness of the pixels both engines light (CSM's coverage, eroded by a pixel
 so anti-aliased edges do not count). EEVEE's float pixels come from its render result saved
-as OpenEXR (linear, no view transform) and loaded back. Units and conventions:
-docs/lighting.md.
+as OpenEXR (linear, no view transform) and loaded back (``tests.bpy.scenes.render_eevee``).
+Units and conventions: docs/lighting.md.
 """
 import math
 import os
@@ -13,23 +13,14 @@ import os
 import bpy
 import numpy as np
 import pytest
-from mathutils import Vector
 
 from csm_engine.core import paths
-from csm_tools.report_io import saved_render
-from tests.bpy.engine.test_render import set_world_color
-from tests.bpy.engine.test_shadows import add_box, add_camera, add_ground, add_sun
+from tests.bpy.scenes import (add_box, add_camera, add_ground, add_light, add_sun, principled,
+                              render_eevee, set_world_color)
 
 WIDTH, HEIGHT = 160, 120
 TOLERANCE = 0.10            # CSM's mean brightness within 10% of EEVEE's
 LUMA = np.array([0.2126, 0.7152, 0.0722])
-
-
-def eevee_engine_id():
-    """4.2 .. 4.x call EEVEE Next 'BLENDER_EEVEE_NEXT'; 3.4 and 5.0 call it 'BLENDER_EEVEE'."""
-    items = {item.identifier for item in
-             bpy.types.RenderSettings.bl_rna.properties["engine"].enum_items}
-    return "BLENDER_EEVEE_NEXT" if "BLENDER_EEVEE_NEXT" in items else "BLENDER_EEVEE"
 
 
 def _set_if_present(owner, name, value):
@@ -70,17 +61,6 @@ def render_csm(scene):
     return result.images["combined"], result.images["aux"][..., 3] > 0.5
 
 
-def render_eevee(scene, folder):
-    """EEVEE's linear combined pass, rows bottom-up: the render result written as a 32-bit
-    OpenEXR (which keeps scene-linear values) and read back."""
-    scene.render.engine = eevee_engine_id()
-    try:
-        bpy.ops.render.render()
-    finally:
-        scene.render.engine = "CSM"
-    return saved_render(scene, os.path.join(str(folder), f"eevee_{scene.name}.exr"))
-
-
 def _eroded(mask):
     inner = mask.copy()
     inner[1:, :] &= mask[:-1, :]
@@ -114,25 +94,6 @@ def assert_same_exposure(scene, folder):
 
 
 # ---- scenes ------------------------------------------------------------------------------
-
-def principled(name, base=(0.8, 0.8, 0.8), roughness=0.5):
-    material = bpy.data.materials.new(name)
-    material.use_nodes = True
-    bsdf = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
-    bsdf.inputs["Base Color"].default_value = (*base, 1.0)
-    bsdf.inputs["Roughness"].default_value = roughness
-    return material
-
-
-def add_light(kind, location, energy, target=(0, 0, 0), **settings):
-    bpy.ops.object.light_add(type=kind, location=location)
-    obj = bpy.context.object
-    obj.data.energy = energy
-    obj.rotation_euler = (Vector(target) - Vector(location)).to_track_quat('-Z', 'Y').to_euler()
-    for name, value in settings.items():
-        setattr(obj.data, name, value)
-    return obj
-
 
 def _named(scene, name):
     scene.name = name

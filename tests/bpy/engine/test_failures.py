@@ -8,7 +8,7 @@ import pytest
 from csm_engine.blender import engine
 from csm_engine.render import pipeline
 from tests.bpy.bpy_helpers import render_result
-from tests.bpy.engine.test_shadows import add_box, add_camera, add_ground, add_sun
+from tests.bpy.scenes import add_box, add_camera, add_ground, add_sun
 
 
 @pytest.fixture

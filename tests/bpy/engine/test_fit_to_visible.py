@@ -6,8 +6,8 @@ import pytest
 
 from csm_engine.core import cascades
 from tests.bpy.bpy_helpers import render_result
-from tests.bpy.engine.test_shadows import (COURSE_SUN, pillar_field, ray_cast_shadowed,  # noqa: F401
-                                           sun_facing_points, world_bvh)
+from tests.bpy.scenes import (COURSE_SUN, pillar_field, ray_cast_shadowed,  # noqa: F401
+                              sun_facing_points, world_bvh)
 
 
 def _texels_per_pixel(result):
@@ -61,7 +61,7 @@ def test_a_small_camera_move_keeps_the_fitted_range():
 
 
 def test_an_empty_view_falls_back_to_the_plain_fit(empty_scene):
-    from tests.bpy.engine.test_shadows import add_camera, add_ground, add_sun
+    from tests.bpy.scenes import add_camera, add_ground, add_sun
     scene = empty_scene
     add_ground(10, location=(0, 0, -50))
     add_sun((0.3, 0.2, -1.0))

@@ -13,9 +13,8 @@ import numpy as np
 import pytest
 
 from tests.bpy.bpy_helpers import render_scene
-from tests.bpy.engine.test_exposure import eevee_engine_id, render_eevee
-from tests.bpy.engine.test_render import set_world_color
-from tests.bpy.engine.test_shadows import add_box, add_camera, add_ground, add_sun
+from tests.bpy.scenes import (add_box, add_camera, add_ground, add_sun, render_eevee,
+                              set_world_color)
 
 SAVE = os.environ.get("CSM_TEST_IMAGES")     # a folder: PNGs of the renders, to look at
 

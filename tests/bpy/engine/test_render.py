@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from tests.bpy.bpy_helpers import render_scene
-from tests.bpy.engine.test_shadows import add_box, add_camera, add_ground, add_sun
+from tests.bpy.scenes import add_box, add_camera, add_ground, add_sun, set_world_color
 
 
 def _principled(material):
@@ -42,18 +42,6 @@ def _textured_plane(image, cutoff=None, location=(0, 0, 0), size=4.0):
             material.alpha_threshold = cutoff
     plane.data.materials.append(material)
     return plane
-
-
-def set_world_color(scene, rgb):
-    """The World colour as a user sets it (Surface > Color), with or without nodes."""
-    world = scene.world or bpy.data.worlds.new("World")
-    scene.world = world
-    world.color = rgb
-    if world.use_nodes and world.node_tree:
-        for node in world.node_tree.nodes:
-            if node.type == 'BACKGROUND':
-                node.inputs[0].default_value = (*rgb, 1.0)
-                node.inputs[1].default_value = 1.0
 
 
 def _top_camera(scene, height=10.0, ortho_scale=None):

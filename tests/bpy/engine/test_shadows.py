@@ -1,95 +1,18 @@
 """What a user sees of the sun's cascaded shadows (and the spot light's), checked in pixels.
 
-Scenes are built here with plain Blender calls so each test shows its whole set-up. The
-reference for "where should the shadow be" is an independent CPU ray cast (mathutils
-BVHTree) from the very surface points the G-buffer saw.
+Scenes are built here with plain Blender calls (the builders in ``tests/bpy/scenes.py``)
+so each test shows its whole set-up. The reference for "where should the shadow be" is an
+independent CPU ray cast (mathutils BVHTree) from the very surface points the G-buffer saw.
 """
 import bpy
 import numpy as np
 import pytest
 from mathutils import Vector
-from mathutils.bvhtree import BVHTree
 
 from tests.bpy.bpy_helpers import render_result, render_scene
-
-COURSE_SUN = Vector((0.3, 0.7, -0.6))   # the course's (0.3, -0.6, -0.7), Y-up -> Z-up
-
-
-def add_box(location, scale, size=2.0):
-    bpy.ops.mesh.primitive_cube_add(size=size, location=location)
-    obj = bpy.context.object
-    obj.scale = scale
-    return obj
-
-
-def add_ground(size, location=(0, 0, 0)):
-    bpy.ops.mesh.primitive_plane_add(size=size, location=location)
-    return bpy.context.object
-
-
-def add_sun(direction):
-    bpy.ops.object.light_add(type='SUN')
-    sun = bpy.context.object
-    sun.rotation_euler = (-Vector(direction)).to_track_quat('Z', 'Y').to_euler()
-    return sun
-
-
-def add_camera(scene, location, target, lens=35.0, clip_end=300.0):
-    bpy.ops.object.camera_add(location=location)
-    camera = bpy.context.object
-    camera.rotation_euler = (Vector(target) - Vector(location)).to_track_quat('-Z', 'Y').to_euler()
-    camera.data.lens = lens
-    camera.data.clip_end = clip_end
-    scene.camera = camera
-    return camera
-
-
-def world_bvh(scene):
-    """One BVH of every mesh triangle in world space."""
-    depsgraph = bpy.context.evaluated_depsgraph_get()
-    verts, polys = [], []
-    for obj in scene.objects:
-        if obj.type != 'MESH':
-            continue
-        mesh = obj.evaluated_get(depsgraph).to_mesh()
-        mesh.calc_loop_triangles()
-        base = len(verts)
-        matrix = obj.matrix_world
-        verts += [matrix @ v.co for v in mesh.vertices]
-        polys += [[base + i for i in tri.vertices] for tri in mesh.loop_triangles]
-        obj.evaluated_get(depsgraph).to_mesh_clear()
-    return BVHTree.FromPolygons(verts, polys)
-
-
-def sun_facing_points(images, to_light, step=2):
-    """(pixel rows, cols), world points and normals of covered pixels facing the sun."""
-    position = images["position"][::step, ::step]
-    normal = images["normal"][::step, ::step, :3]
-    covered = position[..., 3] > 0.5
-    facing = (normal @ np.asarray(to_light, dtype=np.float32)) > 0.1
-    rows, cols = np.nonzero(covered & facing)
-    return rows * step, cols * step, position[rows, cols, :3], normal[rows, cols]
-
-
-def ray_cast_shadowed(bvh, points, normals, to_light):
-    to_light = Vector(to_light).normalized()
-    shadowed = np.zeros(len(points), dtype=bool)
-    for i, (p, n) in enumerate(zip(points, normals)):
-        origin = Vector(p) + Vector(n) * 1e-3 + to_light * 1e-3
-        shadowed[i] = bvh.ray_cast(origin, to_light)[0] is not None
-    return shadowed
-
-
-@pytest.fixture
-def pillar_field(empty_scene):
-    """The course's shadow test: a ground plane and 39 boxes scaled (1,3,1) (Y-up), 5 apart."""
-    scene = empty_scene
-    add_ground(240, location=(95, 0, 0))
-    for i in range(39):
-        add_box((i * 5.0, 0, 3.0), (1, 1, 3))
-    sun = add_sun(COURSE_SUN)
-    add_camera(scene, (-20, 50, 32), (35, 0, 0), lens=30)
-    return scene, sun
+from tests.bpy.scenes import (COURSE_SUN, add_box, add_camera, add_ground, add_sun,  # noqa: F401
+                              pillar_field, ray_cast_shadowed, set_world_color,
+                              sun_facing_points, world_bvh)
 
 
 def test_pillar_shadows_fall_where_a_ray_cast_says(pillar_field):
@@ -341,7 +264,6 @@ def test_spot_light_casts_a_shadow(empty_scene):
     spot.data.use_custom_distance = True
     spot.data.cutoff_distance = 30.0
     add_camera(scene, (4.0, -14.0, 14.0), (2.0, 0.0, 0.0))
-    from tests.bpy.engine.test_render import set_world_color
     set_world_color(scene, (0.0, 0.0, 0.0))
 
     brightness, blocked, points = lit_ground(scene, spot.location, 320, 240)
@@ -420,7 +342,6 @@ def boxes_round_a_point_light(empty_scene):
     light.data.energy = 2000.0
     light.data.shadow_soft_size = 0.0
     add_camera(scene, (0.0, -0.5, 28.0), (0.0, 0.0, 0.0), lens=30.0)
-    from tests.bpy.engine.test_render import set_world_color
     set_world_color(scene, (0.0, 0.0, 0.0))
     return scene, light
 
