@@ -271,8 +271,14 @@ def list_settings(overrides=()):
     values = types.SimpleNamespace(**{s.identifier: s.default for s in settings_model.SETTINGS})
     for override in overrides:
         apply_override(values, override)
-    for line in settings_listing(vars(values)):
-        print(line)
+    try:
+        for line in settings_listing(vars(values)):
+            print(line)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        # The reader stopped early (``| head``), which is no error; pointing stdout at
+        # the null device keeps Python's own flush at exit from reporting it again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
 
 
 def screenshot_path(text, scene_path):
@@ -405,7 +411,8 @@ def run(argv, prog="python -m csm_engine"):
     require("bpy", argv, prog)
     from . import engine
     scene_path = args.scene or paths.default_scene_path()
-    shot = screenshot_path(args.screenshot or DEFAULT_SCREENSHOT, scene_path)
+    shot = screenshot_path(DEFAULT_SCREENSHOT if args.screenshot is None else args.screenshot,
+                           scene_path)
     scene = open_scene(scene_path, args.overrides, resolution)
     render = scene.render
     render.engine = "CSM"

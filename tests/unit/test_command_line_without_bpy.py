@@ -219,3 +219,15 @@ def test_suggested_commands_quote_what_the_shell_would_split():
                                      ["my scene.json", "shot.png"], "python -m csm_engine")
     assert " render 'my scene.json' shot.png " in message, message
     assert shlex.split(message.split(" -- ")[-1]) == ["my scene.json", "shot.png"]
+
+
+def test_list_settings_into_a_reader_that_stops_early_is_no_error(tmp_path):
+    """``--list-settings | head``: the pipe closes before the listing is written."""
+    env = dict(os.environ, PYTHONPATH=REPO)
+    process = subprocess.Popen([*PYTHONS["bpy refused"], "--list-settings"], cwd=tmp_path,
+                               env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    process.stdout.close()          # the only reader goes before the child has started
+    errors = process.stderr.read().decode()
+    process.stderr.close()
+    assert process.wait(timeout=60) == 0, errors
+    assert errors == ""
