@@ -366,9 +366,13 @@ def no_blender_message(error, argv, prog):
     the commands that render the same ``argv``, with paths that work from here."""
     args = shlex.join(argv)
     tail = " " + args if args else ""
-    missing = error.name if getattr(error, "name", None) in ("bpy", "numpy") else None
-    what = (f"{sys.executable} has no {missing}" if missing
-            else f"{sys.executable} cannot import bpy ({' '.join(str(error).split())})")
+    missing = getattr(error, "name", None)
+    if missing == "bpy":
+        what = f"{sys.executable} has no bpy, Blender's Python module"
+    elif missing == "numpy":
+        what = f"{sys.executable} has no numpy"
+    else:
+        what = f"{sys.executable} cannot import bpy ({' '.join(str(error).split())})"
     dev = os.path.join(paths.CHECKOUT_DIR, "dev")
     bridge = f"blender -b -P {shell_path(os.path.join(paths.PACKAGE_DIR, 'blender_cli.py'))} --"
     if os.path.isfile(dev):
@@ -378,7 +382,7 @@ def no_blender_message(error, argv, prog):
     else:
         ways = (f"pip install bpy (Python 3.11) and {prog}{tail} again, "
                 f"or {bridge}{tail}")
-    return f"{what}, Blender's Python module; render with {ways}"
+    return f"{what}; run it with {ways}"
 
 
 def require(module, argv, prog):

@@ -107,6 +107,13 @@ def test_a_bpy_that_fails_to_import_is_named_with_its_reason(tmp_path):
     assert "cannot import bpy (libXi.so.6: cannot open shared object file)" in line, line
 
 
+def test_list_settings_on_a_python_without_numpy_is_one_line_too(tmp_path):
+    result = run_without_bpy(["--list-settings"], tmp_path, "no site-packages")
+    assert result.returncode == cli.EXIT_NO_BLENDER
+    line = only_error(result)
+    assert "has no numpy" in line and "blender_cli.py -- --list-settings" in line, line
+
+
 def test_help_needs_no_blender(tmp_path):
     result = run_without_bpy(["--help"], tmp_path, "no site-packages")
     assert result.returncode == 0, result.stderr
