@@ -1,5 +1,5 @@
-"""``python -m csm_engine [scene.json [screenshot.png]]`` on pip bpy (see cli.py)."""
-from csm_engine.blender.cli import main
-from csm_engine.blender.compat import exit_process
+"""``python -m csm_engine [scene.json [screenshot.png]]`` on pip bpy (see cli.py); on a
+Python without bpy it says, in one line, how to run it instead."""
+from csm_engine.blender.cli import exit_process, main
 
 exit_process(main())

@@ -8,10 +8,11 @@ import sys
 
 if __name__ == "__main__":
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-    from csm_engine.blender.cli import main
+    from csm_engine.blender.cli import main, shell_path
 
     argv = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else []
-    code = main(argv, prog="blender -b -P blender_cli.py --")
+    # Usage lines and hints name this file as the user reaches it from where they are.
+    code = main(argv, prog=f"blender -b -P {shell_path(os.path.abspath(__file__))} --")
     sys.stdout.flush()
     sys.stderr.flush()
     os._exit(code)   # Blender would otherwise exit 0 whatever the script returned

@@ -3,20 +3,30 @@
 Owns the course's ``argv[1]`` = scene file, ``argv[2]`` = screenshot contract, for both
 ``python -m csm_engine`` (pip ``bpy``) and ``blender -b -P blender_cli.py -- ...``. Every
 user mistake ends with one line on stderr and a non-zero exit code, never a traceback.
+
+Importing this module needs neither ``bpy`` nor numpy: ``--help``, the argument checks and
+the message that says how to run it answer on any Python 3, ``--list-settings`` on any
+with numpy (it reads the settings model, not Blender); only rendering needs ``bpy``.
 """
 
 import argparse
+import importlib
+import math
 import os
 import re
+import shlex
+import struct
 import sys
+import types
 
-from ..core import settings_model
+from ..core import paths
 from ..core.captured_output import CapturedOutput
 
 EXIT_USAGE = 2
 EXIT_SCENE = 3
 EXIT_RENDER = 4
 EXIT_OUTPUT = 5
+EXIT_NO_BLENDER = 6      # this Python cannot import bpy (or numpy): run it another way
 
 
 class CLIError(Exception):
@@ -25,13 +35,16 @@ class CLIError(Exception):
         self.code = code
 
 
+DEFAULT_SCREENSHOT = "csm_default.png"
+
+
 def build_parser(prog="python -m csm_engine"):
     parser = argparse.ArgumentParser(
         prog=prog,
         description="Render a CS562-style JSON scene with the CSM engine and save a PNG.")
     parser.add_argument("scene", nargs="?", help="scene .json (default: the bundled scene)")
-    parser.add_argument("screenshot", nargs="?", default="csm_default.png",
-                        help="PNG to write, exactly this path (default: csm_default.png)")
+    parser.add_argument("screenshot", nargs="?",
+                        help=f"PNG to write, exactly this path (default: {DEFAULT_SCREENSHOT})")
     parser.add_argument("--resolution", default="1280x720", metavar="WxH",
                         help="image size in pixels (default 1280x720)")
     parser.add_argument("--set", dest="overrides", action="append", default=[],
@@ -39,7 +52,8 @@ def build_parser(prog="python -m csm_engine"):
                         help="override a CSM setting, e.g. --set pcf_radius=2 "
                              "--set debug_view=CASCADES (repeatable)")
     parser.add_argument("--list-settings", action="store_true",
-                        help="print every setting with its default and exit")
+                        help="print every setting (identifier, default or --set value, unit, "
+                             "allowed values, what it does) and exit")
     return parser
 
 
@@ -55,7 +69,9 @@ def parse_resolution(text):
 
 def apply_override(csm, text):
     """Set one CSM property from 'name=value' text, checked against the setting's kind,
-    enum items and hard range in the settings model."""
+    enum items and hard range in the settings model. ``csm`` is the scene's CSM settings
+    or any object with one attribute per setting."""
+    from ..core import settings_model
     if "=" not in text:
         raise CLIError(f"--set: expected SETTING=VALUE, got '{text}'")
     name, value = (part.strip() for part in text.split("=", 1))
@@ -114,7 +130,7 @@ def open_scene(scene_path=None, overrides=(), resolution=None):
     the bundled scene), apply ``--set`` overrides, and size the render. Returns the scene.
     A broken scene file or setting raises CLIError with a one-line reason."""
     import bpy
-    from ..core import paths, scene_format
+    from ..core import scene_format
     from . import scene_builder
 
     bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -138,10 +154,131 @@ def open_scene(scene_path=None, overrides=(), resolution=None):
     return scene
 
 
-def list_settings(scene):
+# How a setting's Blender unit or subtype reads after a number. Angles are stored in
+# radians and shown in degrees, as Blender's fields show them.
+UNIT_SYMBOLS = {"LENGTH": "m", "DISTANCE": "m", "ROTATION": "°", "ANGLE": "°",
+                "VELOCITY": "m/s", "TIME": "s", "TIME_ABSOLUTE": "s", "PIXEL": "px",
+                "PERCENTAGE": "%"}
+ANGLE_UNITS = {"ROTATION", "ANGLE"}
+
+
+def unit_symbol(setting):
+    """The unit a setting's numbers are in ("m", "px", "°", ...), "" for plain numbers."""
+    for key in (setting.unit, setting.subtype):
+        if key in UNIT_SYMBOLS:
+            return UNIT_SYMBOLS[key]
+    return ""
+
+
+def format_number(value, setting):
+    """A setting's number as a person writes it: 0.9 (never 0.8999999761581421), 100
+    rather than 100.0, an angle in degrees."""
+    if not isinstance(value, float):
+        return str(value)
+    if ANGLE_UNITS & {setting.unit, setting.subtype}:
+        value = math.degrees(value)
+    # The fewest digits that give back the same float32, the precision Blender stores: a
+    # value read from Blender and the same value typed in print alike.
+    shortest = value
+    for digits in range(1, 10):
+        candidate = float(f"{value:.{digits}g}")
+        if _float32(candidate) == _float32(value):
+            shortest = candidate
+            break
+    text = repr(shortest)
+    return text[:-2] if text.endswith(".0") else text
+
+
+def _float32(value):
+    try:
+        return struct.unpack("f", struct.pack("f", value))[0]
+    except OverflowError:
+        return value
+
+
+def format_value(value, setting):
+    """``value`` of ``setting`` as --set takes it back: on/off, an enum's identifier, a
+    number with its unit, a vector's components separated by commas."""
+    from ..core import settings_model
+    if setting.kind == settings_model.BOOLEAN:
+        return "on" if value else "off"
+    if setting.kind == settings_model.ENUM:
+        return str(value)
+    if setting.kind == settings_model.FLOAT_VECTOR:
+        text = ", ".join(format_number(v, setting) for v in value)
+    else:
+        text = format_number(value, setting)
+    unit = unit_symbol(setting)
+    return f"{text} {unit}" if unit else text
+
+
+def allowed_values(setting):
+    """What ``--set`` accepts for ``setting``, from the settings model: an enum's
+    identifiers, on/off, or the hard range with its unit (a limit that is only the stored
+    type's own is left out)."""
+    from ..core import settings_model
+    if setting.kind == settings_model.ENUM:
+        return "one of " + ", ".join(setting.identifiers)
+    if setting.kind == settings_model.BOOLEAN:
+        return "on or off"
+    unit = unit_symbol(setting)
+    suffix = f" {unit}" if unit else ""
+    low, high = (None if limit is None else format_number(limit, setting)
+                 for limit in (setting.min, setting.max))
+    if low is not None and high is not None:
+        text = f"{low} to {high}{suffix}"
+    elif low is not None:
+        text = f"{low}{suffix} or more"
+    elif high is not None:
+        text = f"up to {high}{suffix}"
+    else:
+        text = "any number"
+    if setting.subtype == "FACTOR":
+        text = "a fraction, " + text
+    if setting.kind == settings_model.FLOAT_VECTOR:
+        text += " each"
+    return text
+
+
+def first_sentence(text):
+    """A description's first sentence (a ".." inside a range does not end it)."""
+    match = re.search(r"(?<!\.)\.(\s|$)", text)
+    return text[:match.start() + 1] if match else text
+
+
+def settings_listing(values=None):
+    """Every setting as two lines: ``identifier = value unit   [allowed values]``, then
+    its label and the first sentence of its description. ``values`` maps identifiers to
+    values (default: the model's defaults). All of it comes from the settings model."""
+    from ..core import settings_model
+    values = values or {}
+    heads = []
     for setting in settings_model.SETTINGS:
-        print(f"{setting.identifier} = {getattr(scene.csm, setting.identifier)!r}"
-              f"  # {setting.description}")
+        value = values.get(setting.identifier, setting.default)
+        heads.append(f"{setting.identifier} = {format_value(value, setting)}")
+    width = max(len(head) for head in heads) + 3
+    lines = []
+    for head, setting in zip(heads, settings_model.SETTINGS):
+        lines.append(f"{head:<{width}}[{allowed_values(setting)}]")
+        lines.append(f"    {setting.name}: {first_sentence(setting.description)}")
+    return lines
+
+
+def list_settings(overrides=()):
+    """Print ``settings_listing`` with ``--set`` overrides applied (checked as a render
+    would check them); needs numpy, not Blender."""
+    from ..core import settings_model
+    values = types.SimpleNamespace(**{s.identifier: s.default for s in settings_model.SETTINGS})
+    for override in overrides:
+        apply_override(values, override)
+    try:
+        for line in settings_listing(vars(values)):
+            print(line)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        # The reader stopped early (``| head``), which is no error; pointing stdout at
+        # the null device keeps Python's own flush at exit from reporting it again.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
 
 
 def screenshot_path(text, scene_path):
@@ -215,17 +352,71 @@ def pass_through(text):
             print(line, file=sys.stderr)
 
 
+def shell_path(path):
+    """``path`` as the user types it from the current folder: relative below it,
+    absolute elsewhere, quoted for the shell."""
+    relative = os.path.relpath(path)
+    if relative.startswith(os.pardir):
+        return shlex.quote(path)
+    return shlex.quote(relative if os.sep in relative else "." + os.sep + relative)
+
+
+def no_blender_message(error, argv, prog):
+    """One line for a Python that cannot import ``bpy`` (``error``): what is missing and
+    the commands that render the same ``argv``, with paths that work from here."""
+    args = shlex.join(argv)
+    tail = " " + args if args else ""
+    missing = getattr(error, "name", None)
+    if missing == "bpy":
+        what = f"{sys.executable} has no bpy, Blender's Python module"
+    elif missing == "numpy":
+        what = f"{sys.executable} has no numpy"
+    else:
+        what = f"{sys.executable} cannot import bpy ({' '.join(str(error).split())})"
+    dev = os.path.join(paths.CHECKOUT_DIR, "dev")
+    bridge = f"blender -b -P {shell_path(os.path.join(paths.PACKAGE_DIR, 'blender_cli.py'))} --"
+    if os.path.isfile(dev):
+        venv = shell_path(os.path.join(paths.CHECKOUT_DIR, ".venv", "bin", "python"))
+        ways = (f"{shell_path(dev)} render{tail} (sets up pip bpy), "
+                f"{venv} -m csm_engine{tail} (once set up), or {bridge}{tail}")
+    else:
+        ways = (f"pip install bpy (Python 3.11) and {prog}{tail} again, "
+                f"or {bridge}{tail}")
+    return f"{what}; run it with {ways}"
+
+
+def require(module, argv, prog):
+    """Import ``module`` (bpy or numpy), or stop with ``no_blender_message``."""
+    try:
+        importlib.import_module(module)
+    except ImportError as error:
+        raise CLIError(no_blender_message(error, argv, prog), EXIT_NO_BLENDER) from None
+
+
+def check_positionals(args, prog):
+    """Refuse a screenshot given where the scene goes (``shot.png`` alone, or the two
+    swapped): it would otherwise be read as a scene file and reported as not found."""
+    if args.scene and args.scene.lower().endswith(".png"):
+        scene = args.screenshot if args.screenshot and not args.screenshot.lower().endswith(
+            ".png") else "scene.json"
+        raise CLIError(f"{args.scene}: that is the screenshot; the scene file comes first: "
+                       f"{prog} {shlex.quote(scene)} {shlex.quote(args.scene)}")
+
+
 def run(argv, prog="python -m csm_engine"):
     parser = build_parser(prog)
     args = parser.parse_args(argv)
+    check_positionals(args, prog)
     resolution = parse_resolution(args.resolution)
     if args.list_settings:
-        list_settings(open_scene())
+        require("numpy", argv, prog)
+        list_settings(args.overrides)
         return 0
-    from ..core import paths
+    require("bpy", argv, prog)
     from . import engine
     scene_path = args.scene or paths.default_scene_path()
-    shot = screenshot_path(args.screenshot, scene_path)
+    shot = screenshot_path(DEFAULT_SCREENSHOT if args.screenshot is None else args.screenshot,
+                           scene_path)
     scene = open_scene(scene_path, args.overrides, resolution)
     render = scene.render
     render.engine = "CSM"
@@ -258,8 +449,16 @@ def main(argv=None, prog="python -m csm_engine"):
     return run_reporting_errors(run, argv, prog, "csm")
 
 
+def exit_process(code):
+    """Leave with ``code``: through ``compat.exit_process`` once bpy is loaded (pip bpy
+    4.2 needs it), plainly on a Python that never loaded it (compat imports bpy)."""
+    if sys.modules.get("bpy") is not None:
+        from .compat import exit_process as exit_blender
+        exit_blender(code)
+    sys.exit(code)
+
+
 def console_main():
     """The ``csm-render`` console command (pip installs): ``python -m csm_engine`` under
     its own name, with the same exit codes."""
-    from .compat import exit_process
     exit_process(main(prog="csm-render"))

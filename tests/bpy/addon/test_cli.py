@@ -11,6 +11,7 @@ import sys
 import numpy as np
 import pytest
 
+from csm_engine.blender import cli
 from tests.bpy.bpy_helpers import load_png
 from tests.conftest import REPO
 
@@ -82,6 +83,42 @@ def test_user_mistakes_give_one_line_and_a_nonzero_exit(tmp_path, args, code, wo
     for word in words:
         assert word in errors[0], (word, errors[0])
     assert not (tmp_path / "out.png").exists()
+
+
+# ------------------------------------------------- --list-settings and argument order
+def _without_banner(result):
+    """stdout without the version line Blender 3.4 prints before any script runs."""
+    return "".join(line for line in result.stdout.splitlines(keepends=True)
+                   if not line.startswith("Blender 3.4"))
+
+
+def test_list_settings_is_the_settings_model_on_both_entry_points(tmp_path):
+    expected = "".join(line + "\n" for line in cli.settings_listing())
+    on_pip_bpy = run_cli(["--list-settings"], cwd=tmp_path)
+    assert on_pip_bpy.returncode == 0, on_pip_bpy.stderr
+    assert on_pip_bpy.stdout == expected
+    on_blender_34 = run_blender_cli(["--list-settings"], tmp_path)
+    assert on_blender_34.returncode == 0, on_blender_34.stderr
+    assert _without_banner(on_blender_34) == expected
+    # What the issue saw: Blender's RNA paths for vectors, float32 noise, no enum values.
+    assert "bpy.data" not in expected and "0.8999999" not in expected
+    assert "manual_splits = 0.1, 0.3, 0.6 " in expected
+    assert "one of UNIFORM, LOG, HYBRID, MANUAL" in expected
+
+
+def test_a_lone_png_is_refused_the_same_way_on_both_entry_points(tmp_path):
+    """Not read as a scene ("shot.png: file not found"): the message says the scene comes
+    first, with the command each entry point is run with."""
+    results = {"python -m csm_engine": run_cli(["shot.png"], cwd=tmp_path),
+               "blender -b -P " + os.path.join(REPO, "csm_engine", "blender_cli.py") + " --":
+                   run_blender_cli(["shot.png"], tmp_path)}
+    for prog, result in results.items():
+        assert result.returncode == 2, (prog, result.stderr)
+        assert result.stderr.splitlines() == [
+            f"csm: error: shot.png: that is the screenshot; the scene file comes first: "
+            f"{prog} scene.json shot.png"], result.stderr
+        assert _without_banner(result) == ""
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_blender_binary_bridge_on_blender_34(tmp_path):
