@@ -48,18 +48,19 @@ def _set_colour(material, rgba):
 
 def _render(scene):
     """(combined image, whether the G-buffer was kept)."""
-    kept = pipeline.GBUFFERS["kept"]
-    image = render_result(scene, W, H).images["combined"].copy()
-    return image, pipeline.GBUFFERS["kept"] > kept
+    result = render_result(scene, W, H)
+    return result.images["combined"].copy(), result.passes.gbuffers_kept > 0
 
 
 def _render_everything(scene):
-    """The same render with nothing kept from the render before."""
-    for name in ("gbuffer_contents", "ao_contents", "depth_blocks"):
-        engine._FINAL_RENDER_TEXTURES.pop(name, None)
-    image, kept = _render(scene)
-    assert not kept
-    return image
+    """The same render with nothing kept from the render before: every shadow tile, the
+    G-buffer and the AO drawn afresh."""
+    engine.forget_final_render_passes()
+    result = render_result(scene, W, H)
+    passes = result.passes
+    assert passes.shadow_tiles_kept == passes.gbuffers_kept == passes.ao_kept == 0
+    assert passes.shadow_tiles_drawn > 0 and passes.gbuffers_drawn > 0
+    return result.images["combined"].copy()
 
 
 def test_unchanged_rerender_keeps_the_gbuffer_and_gives_the_same_pixels(empty_scene):
@@ -133,10 +134,9 @@ def test_edits_that_reach_the_gbuffer_draw_it_again(empty_scene, edit):
     }[edit]
     change()
     if edit == "resolution":
-        kept = pipeline.GBUFFERS["kept"]
-        image = render_result(scene, W + 8, H).images["combined"]
-        assert pipeline.GBUFFERS["kept"] == kept
-        assert image.shape[1] == W + 8
+        result = render_result(scene, W + 8, H)
+        assert result.passes.gbuffers_kept == 0
+        assert result.images["combined"].shape[1] == W + 8
         return
     after, kept = _render(scene)
     # More samples: the first (unjittered) sample's G-buffer is the one held; the others
@@ -229,9 +229,8 @@ def test_viewport_keeps_the_gbuffer_while_shadows_are_tuned(empty_scene):
                             (lambda: setattr(cube, "location", (1.5, 0.5, 1.2)), False)):
             edit()
             bpy.context.view_layer.update()
-            kept = pipeline.GBUFFERS["kept"]
             after = _viewport_frame(scene, renderer, cache)
-            assert (pipeline.GBUFFERS["kept"] > kept) == keeps
+            assert (renderer.last_frame.gbuffers_kept > 0) == keeps
             assert np.abs(after - before).max() > 0.02
             assert np.array_equal(after, fresh())
             before = after
