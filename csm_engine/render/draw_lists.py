@@ -69,8 +69,6 @@ class InstanceArrays:
 # The G-buffer programs' material samplers, in DrawMaterial.textures order.
 MATERIAL_SAMPLERS = ("base_color_texture", "normal_texture", "emission_texture",
                      "surface_texture")
-# Slots without a material draw as Blender's default grey.
-_DEFAULT_MATERIAL = MaterialInfo()
 
 
 class DrawMaterial:
@@ -193,6 +191,10 @@ class HeldDrawLists:
         self._draws = None          # the last frame's MeshDraws and what they came from
         self._lists = None          # DrawLists of the last frame's MeshDraws
         self._signatures = {}       # instance key -> (MeshDraws, CasterSignature or None)
+        # Slots without a material draw as Blender's default grey. Its uniform block lives
+        # with this view, never in module state: a GPU object still alive when Python
+        # exits is freed after the GPU context is gone, which crashes.
+        self._default_material = MaterialInfo()
 
     def instances(self, snap, cache):
         """This frame's ``InstanceArrays``: the last frame's when the instances, their
@@ -258,7 +260,7 @@ class HeldDrawLists:
                     (mesh is None or mesh.materials is materials)
                     for key, mesh, materials in held[2]) and _same_textures(cache, held[3]):
             return held[4]
-        items = _draw_items(snap, cache, white)
+        items = _draw_items(snap, cache, white, self._default_material)
         meshes = [(key, cache.meshes.get(key)) for key in dict.fromkeys(keys)]
         textures = tuple((image, cache.textures.get(image.name))
                          for _key, mesh in meshes if mesh is not None
@@ -272,7 +274,7 @@ class HeldDrawLists:
         return items
 
 
-def _draw_items(snap, cache, white):
+def _draw_items(snap, cache, white, default_material):
     """Per instance, its mesh's ``MeshDraws``. Instances of one mesh share them, and slots
     of one material share its ``DrawMaterial`` (so the G-buffer binds a material shared by
     many objects once)."""
@@ -285,7 +287,8 @@ def _draw_items(snap, cache, white):
             mesh = cache.meshes.get(instance.key)
             entry = MeshDraws([], [], [], [], bool(mesh is not None and mesh.has_tangents), [])
             for batch, slot in (mesh.batches if mesh is not None else ()):
-                material = _material(cache, mesh, slot, white, per_material)
+                material = _material(cache, mesh, slot, white, default_material,
+                                     per_material)
                 camera = entry.masked if material.alpha_mode != 'OPAQUE' else \
                     (entry.textured if material.textured else entry.untextured)
                 camera.append((batch, material))
@@ -298,19 +301,20 @@ def _draw_items(snap, cache, white):
     return items
 
 
-def _material(cache, mesh, slot, white, memo=None):
+def _material(cache, mesh, slot, white, default_material, memo=None):
     """One material slot as both the shadow and G-buffer passes draw it: its uniform
     block (made once per MaterialInfo and set of loadable textures, kept on it),
     textures (white where there is none) and settings."""
     import gpu
     material = mesh.materials[slot] if slot < len(mesh.materials) else None
     if material is None:
-        material = _DEFAULT_MATERIAL
+        material = default_material
     if memo is not None:
         # Keyed by identity: MaterialInfo objects live in the meshes' lists meanwhile.
         held = memo.get(id(material))
         if held is None:
-            held = memo[id(material)] = _material(cache, mesh, slot, white)
+            held = memo[id(material)] = _material(cache, mesh, slot, white,
+                                                  default_material)
         return held
     images = (material.image, material.normal_image, material.emission_image,
               material.surface_image)
