@@ -53,6 +53,7 @@ class Pipeline:
         self.warnings = []
         self.timings = {}
         self.last_frame = PassCounts()  # what the last ``draw`` drew and kept
+        self.last_plan = None           # the shadow plan the last ``draw`` used
         self.gbuffer_fb = None          # kept after draw() for the final render's read-back
 
     @property
@@ -74,15 +75,17 @@ class Pipeline:
     def benchmark_skip_gpu_calls(self, value):
         self.targets.benchmark_skip_gpu_calls = value
 
-    def gbuffer_depth_texture(self, width, height):
-        """The G-buffer's depth buffer; attached to a lighting target too (see draw)."""
-        return self.targets.gbuffer_depth(width, height)
-
     def _texture(self, name, size, fmt):
+        """``Targets.texture`` (tests allocate through it to see a failure's message)."""
         return self.targets.texture(name, size, fmt)
 
-    def _plan(self, snap, bounds, depth_blocks=None):
-        """The shadow plan of this view's frame: the one call into the planner."""
+    def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False):
+        """This view's shadow planning, the one place the pipeline calls the planner: the
+        frame's plan (``depth_blocks``: the visible depths Fit to Visible Depth fits to),
+        or with ``gbuffer_only`` the plan a Fit to Visible Depth frame draws its G-buffer
+        with before those depths are known."""
+        if gbuffer_only:
+            return gbuffer_plan(snap, bounds)
         return plan_shadows(snap, bounds, depth_blocks)
 
     def _warn(self, messages):
@@ -99,8 +102,10 @@ class Pipeline:
     def draw(self, snap, cache, target_fb=None, width=None, height=None, plan=None,
              overlays=True, depth_tested=False):
         """Render one frame into ``target_fb`` (None: the currently bound framebuffer);
-        returns the shadow plan. ``depth_tested``: ``target_fb`` has the G-buffer's depth
-        texture attached (``gbuffer_depth_texture``), so lighting can skip the background.
+        returns the shadow plan (also ``last_plan``); ``last_frame`` says what it drew
+        and kept.
+        ``depth_tested``: ``target_fb`` has the G-buffer's depth
+        texture attached (``Targets.gbuffer_depth``), so lighting can skip the background.
         ``plan``: a shadow plan to reuse (the jittered samples of one final render share
         the plan of its unjittered camera, so their shadow maps are drawn once).
         ``overlays``: draw the frozen cascade boxes; anti-aliased frames draw them after
@@ -123,7 +128,7 @@ class Pipeline:
         # fields (the G-buffer reads only the camera from it).
         fit_to_visible = plan is None and bool(snap.settings.fit_to_visible)
         if plan is None:
-            plan = gbuffer_plan(snap, bounds) if fit_to_visible else self._plan(snap, bounds)
+            plan = self._plan(snap, bounds, gbuffer_only=fit_to_visible)
         self._warn(snap.warnings + plan.warnings)
         # Allocated before the frame block is packed: a failed allocation halves the
         # plan's resolutions, which the block carries.
@@ -143,15 +148,15 @@ class Pipeline:
             return tiles, self._sync(atlas.framebuffer, "shadow", t)
 
         def gbuffer_pass(t):
-            drawn = draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo,
-                                 frame_data, width, height)
-            return drawn, self._sync(drawn[0].framebuffer, "gbuffer", t)
+            gbuffer, kept = draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo,
+                                         frame_data, width, height)
+            return gbuffer, kept, self._sync(gbuffer.framebuffer, "gbuffer", t)
 
         t = time.perf_counter()
         if fit_to_visible:
             # Sample-distribution shadow maps: the G-buffer first, its nearest and farthest
             # view depth, then cascades fitted to that range, then their shadow maps.
-            (gbuffer, gbuffer_kept), t = gbuffer_pass(t)
+            gbuffer, gbuffer_kept, t = gbuffer_pass(t)
             blocks = self.visible_depth.blocks(targets, gbuffer, gbuffer_kept, width, height)
             t = self._sync(gbuffer.framebuffer, "depth_range", t)
             plan = self._plan(snap, bounds, blocks)
@@ -161,7 +166,7 @@ class Pipeline:
             tiles, t = shadow_pass(t)
         else:
             tiles, t = shadow_pass(t)
-            (gbuffer, gbuffer_kept), t = gbuffer_pass(t)
+            gbuffer, gbuffer_kept, t = gbuffer_pass(t)
 
         ambient_occlusion = draw_ambient_occlusion(targets, snap, frame_ubo, frame_data,
                                                    gbuffer, gbuffer_kept, width, height)
@@ -175,6 +180,7 @@ class Pipeline:
 
         self.gbuffer_fb = gbuffer.framebuffer
         self.last_frame = _counts(targets, tiles, gbuffer_kept, ambient_occlusion)
+        self.last_plan = plan
         self.timings["total"] = time.perf_counter() - start
         return plan
 

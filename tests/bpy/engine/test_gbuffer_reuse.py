@@ -19,6 +19,20 @@ from tests.bpy.bpy_helpers import cube_on_plane, render_result, viewport_frame
 W, H = 96, 64
 
 
+class _DrawsWithPlan(pipeline.Pipeline):
+    """A new pipeline (its own textures, records and planning state) that draws ``plan``
+    instead of planning. It is the reference for a kept frame: the same cascades drawn
+    with nothing kept, whatever the planner carried over from the views the kept frame's
+    pipeline drew before (a new view's plan may differ)."""
+
+    def __init__(self, plan):
+        super().__init__()
+        self.plan = plan
+
+    def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False):
+        return self.plan
+
+
 def _scene(empty_scene):
     scene = empty_scene
     cube, sun = cube_on_plane(scene)
@@ -208,7 +222,7 @@ def _viewport_frame(scene, renderer, cache):
 def test_viewport_keeps_the_gbuffer_while_shadows_are_tuned(empty_scene):
     """In the viewport too: the second redraw of an unmoved view records the G-buffer, a
     PCF or sun change then keeps it and shows; a moved object draws it again. Every frame
-    equals a fresh pipeline's."""
+    equals a fresh pipeline's with the same shadow plan."""
     from csm_engine.blender import mesh_cache
     scene, cube, sun = _scene(empty_scene)
     _render(scene)                        # a GPU context exists from here on
@@ -219,7 +233,8 @@ def test_viewport_keeps_the_gbuffer_while_shadows_are_tuned(empty_scene):
     renderer = pipeline.Pipeline()
     try:
         def fresh():
-            return _viewport_frame(scene, pipeline.Pipeline(), mesh_cache.MeshCache())
+            return _viewport_frame(scene, _DrawsWithPlan(renderer.last_plan),
+                                   mesh_cache.MeshCache())
 
         _viewport_frame(scene, renderer, cache)
         before = _viewport_frame(scene, renderer, cache)
