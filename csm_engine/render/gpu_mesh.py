@@ -47,7 +47,7 @@ class MaterialInfo:
     shadow_mode: str = "OPAQUE"                  # NONE, OPAQUE, CLIP, HASHED
     backface_culling: bool = False               # camera passes
     backface_culling_shadow: bool = False        # shadow pass
-    gpu_block: object = None                     # the pipeline's (flags, GPUUniformBuf)
+    gpu_block: object = None                     # draw_lists: (flags, GPUUniformBuf, ...)
 
     @property
     def needs_tangents(self):

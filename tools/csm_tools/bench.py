@@ -20,8 +20,10 @@ How each number is taken:
 - Viewport: what ``CSMRenderEngine.view_draw`` does per redraw, minus the window: the
   snapshot (``engine.ViewportSnapshots``: read again only after a depsgraph update, as
   ``view_update`` reports them), then ``Pipeline.draw`` into an offscreen target.
-  "Python overhead" is the same redraw with the draw and clear calls skipped: snapshot,
-  sync, planning, binding and uniforms.
+  "Python overhead" is the same redraw with the draw and clear calls skipped
+  (``Pipeline.benchmark_skip_gpu_calls``): snapshot, sync, planning, binding and uniforms.
+  Uploads are the viewport's own (``ViewportSnapshots.mesh_uploads``); shadow tiles drawn
+  and kept are summed from ``Pipeline.last_frame`` over the real redraws.
 """
 
 import argparse
