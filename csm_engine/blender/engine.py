@@ -18,13 +18,19 @@ import time
 
 import bpy
 
+from ..core.view_state import ShadowViewState
 from ..render import gpu_mesh, pipeline, shaders
+from ..render.resources import RenderResources
 from ..render.result import RenderResult
 from . import compat, mesh_cache, snapshot
 
-# Render targets and shadow atlas kept from one final render to the next (each render gets
-# a new engine instance and GPU context; textures, unlike framebuffers, may be shared).
-_FINAL_RENDER_TEXTURES = {}
+# Render targets and shadow atlas kept from one final render to the next, with the record
+# of what they hold (each render gets a new engine instance and GPU context; textures,
+# unlike framebuffers, may be shared), so an unchanged pass is not drawn again.
+_FINAL_RENDER_RESOURCES = RenderResources()
+# What shadow planning carries from one final render to the next (Freeze Cascades holds
+# the first render's cascades): the final render is one view, each viewport another.
+_FINAL_RENDER_VIEW = ShadowViewState()
 # GPU meshes kept from one final render to the next, so a re-render, or an animation frame,
 # uploads only meshes whose contents changed (MeshCache.check_contents). Vertex and index
 # buffers may be shared between GPU contexts; a GPUBatch's vertex arrays (VAOs) are per
@@ -96,8 +102,7 @@ def forget_final_render_passes():
     """Make the next final render draw every pass again (shadow maps, G-buffer, AO), as
     one whose view and scene changed does; its meshes are kept (the benchmark's full
     frames)."""
-    for name in ("gbuffer_contents", "ao_contents", "depth_blocks", "atlas_contents"):
-        _FINAL_RENDER_TEXTURES.pop(name, None)
+    _FINAL_RENDER_RESOURCES.frame_cache.forget()
 
 
 def _final_mesh_cache():
@@ -190,7 +195,7 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         start = time.perf_counter()
         snap = snapshot.take(depsgraph, camera)
         scene_read = time.perf_counter() - start
-        uploaded_before = gpu_mesh.UPLOADS["bytes"]
+        mark = gpu_mesh.serial_mark()
         cache = _final_mesh_cache()
         if _FORGET_FINAL_MESHES[0]:
             cache.clear()
@@ -200,12 +205,14 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         mesh_upload = time.perf_counter() - start - scene_read
         self.update_progress(0.3)
         self._stats(f"Drawing {sum(m.triangle_count for m in cache.meshes.values())} triangles")
-        renderer = pipeline.Pipeline(textures=_FINAL_RENDER_TEXTURES)
+        renderer = pipeline.Pipeline(resources=_FINAL_RENDER_RESOURCES,
+                                     view_state=_FINAL_RENDER_VIEW)
         renderer.profile = request.profile
         result = renderer.render_offscreen(snap, cache, _reads(depsgraph, request.keep_images),
                                            with_positions=request.keep_images)
         result.timings.update(scene_read=scene_read, mesh_upload=mesh_upload)
-        result.upload_bytes = gpu_mesh.UPLOADS["bytes"] - uploaded_before
+        result.mesh_uploads, result.upload_bytes = gpu_mesh.uploads_since(
+            cache.meshes.values(), mark)
         self.update_progress(0.9)
 
         t = time.perf_counter()
@@ -294,6 +301,7 @@ class ViewportSnapshots:
         self.snap = None
         self.scene_changed = True
         self._time = None
+        self.mesh_uploads = 0       # meshes this viewport's syncs uploaded, all told
 
     def scene_updated(self, cache, updates):
         """What ``view_update`` does with the depsgraph's updates: invalidate what they
@@ -309,6 +317,7 @@ class ViewportSnapshots:
         if self.snap is None or self.scene_changed or time != self._time:
             snap = snapshot.take(depsgraph, camera, is_viewport=True)
             cache.sync(snap.mesh_sources)
+            self.mesh_uploads += cache.last_sync["uploaded"]
             snap.mesh_sources = {}
             self.snap, self.scene_changed, self._time = snap, False, time
             return snap
@@ -414,7 +423,7 @@ def release_gpu_resources(exiting=True):
     """Free the GPU objects kept between renders (final-render targets, compiled shaders).
     Called when the add-on is disabled and when Python exits: Blender counts anything still
     alive then as leaked and prints "Not freed memory blocks" at exit."""
-    _FINAL_RENDER_TEXTURES.clear()
+    _FINAL_RENDER_RESOURCES.clear()
     for cache in _FINAL_RENDER_MESHES:
         cache.clear()
     shaders.LIBRARY.release()

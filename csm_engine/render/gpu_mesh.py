@@ -1,21 +1,22 @@
 """Meshes on the GPU: numpy arrays -> one vertex buffer and an index buffer per material.
 
-Owns ``GPUMesh``, ``MaterialInfo`` (what the passes read of one material slot) and
-``upload``; ``UPLOADS`` counts uploads (and bytes) so tests and the benchmark can prove that
-unchanged meshes are not uploaded again. Only meshes whose materials use a normal map carry
-per-corner tangents (16 more bytes a corner).
+Owns ``GPUMesh``, ``MaterialInfo`` (what the passes read of one material slot),
+``upload``, and ``uploads_since``, which tells what a sync uploaded (each mesh knows its
+bytes and serial), so a render can report it and tests can prove that unchanged meshes are
+not uploaded again. Only meshes whose materials use a normal map carry per-corner tangents
+(16 more bytes a corner).
 """
 
+import itertools
 from dataclasses import dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 
 
-# Total mesh uploads in this process; read by tests and the benchmark.
-UPLOADS = {"count": 0, "bytes": 0}
-# Serial number of the next upload: a GPUMesh's ``serial`` names its geometry, so a shadow
-# tile drawn from the same serials, matrices and light matrix need not be drawn again.
-_NEXT_SERIAL = [1]
+# Serial numbers of uploads, never reused: a GPUMesh's ``serial`` names its geometry, so a
+# shadow tile drawn from the same serials, matrices and light matrix need not be drawn again.
+_SERIALS = itertools.count(1)
 BYTES_PER_CORNER = 32       # a GPU vertex: position + normal + uv, float32 (see _vertex_format)
 BYTES_PER_TANGENT = 16      # tangent xyz + bitangent sign, float32, normal-mapped meshes only
 BYTES_PER_TRIANGLE = 12     # three int32 indices
@@ -46,7 +47,7 @@ class MaterialInfo:
     shadow_mode: str = "OPAQUE"                  # NONE, OPAQUE, CLIP, HASHED
     backface_culling: bool = False               # camera passes
     backface_culling_shadow: bool = False        # shadow pass
-    gpu_block: object = None                     # the pipeline's (flags, GPUUniformBuf)
+    gpu_block: object = None                     # draw_lists: (flags, GPUUniformBuf, ...)
 
     @property
     def needs_tangents(self):
@@ -62,8 +63,29 @@ class GPUMesh:
     triangle_count: int
     vertex_buffer: object = None
     index_buffers: list = field(default_factory=list)
-    serial: int = 0                # unique per upload (see _NEXT_SERIAL)
+    serial: int = 0                # unique per upload (see _SERIALS)
     has_tangents: bool = False     # the vertex buffer has "tan" (normal-mapped materials)
+    upload_bytes: int = 0          # vertex and index data this upload sent to the GPU
+
+
+class Uploads(NamedTuple):
+    """Meshes uploaded, and the bytes of vertex and index data they sent."""
+    count: int = 0
+    bytes: int = 0
+
+
+def serial_mark():
+    """A number below the serial of every upload made after this call: pass it to
+    ``uploads_since`` to learn what a sync uploaded."""
+    return next(_SERIALS)
+
+
+def uploads_since(meshes, mark):
+    """The uploads among ``meshes`` (GPUMesh or None; copies of one upload count once) made
+    after ``serial_mark()`` returned ``mark``."""
+    fresh = {mesh.serial: mesh.upload_bytes for mesh in meshes
+             if mesh is not None and mesh.serial > mark}
+    return Uploads(len(fresh), sum(fresh.values()))
 
 
 def _vertex_format(with_tangents=False):
@@ -105,13 +127,11 @@ def upload(positions, normals, uvs, triangles, material_index, object_bounds, ma
             ibos.append(ibo)
             batches.append((gpu.types.GPUBatch(type='TRIS', buf=vbo, elem=ibo), slot))
     aabb_min, aabb_max = object_bounds
-    UPLOADS["count"] += 1
-    serial = _NEXT_SERIAL[0]
-    _NEXT_SERIAL[0] += 1
-    UPLOADS["bytes"] += len(positions) * (BYTES_PER_CORNER + with_tangents * BYTES_PER_TANGENT) \
+    upload_bytes = len(positions) * (BYTES_PER_CORNER + with_tangents * BYTES_PER_TANGENT) \
         + len(triangles) * BYTES_PER_TRIANGLE
     return GPUMesh(batches=batches, materials=list(materials),
                    aabb_min=aabb_min.astype(np.float64), aabb_max=aabb_max.astype(np.float64),
                    triangle_count=len(triangles), vertex_buffer=vbo, index_buffers=ibos,
-                   serial=serial, has_tangents=with_tangents)
+                   serial=next(_SERIALS), has_tangents=with_tangents,
+                   upload_bytes=upload_bytes)
 

@@ -52,7 +52,7 @@ if REPO not in sys.path:
     sys.path.insert(0, REPO)
 
 STATE = {"started": time.monotonic(), "step": "setup", "draws": 0, "draws_at_mark": 0,
-         "draw_error": None, "window": None, "area": None, "region": None}
+         "draw_error": None, "mesh_uploads": 0, "window": None, "area": None, "region": None}
 REPORT = {"error": None, "blender": bpy.app.version_string, "timings_s": {}}
 
 
@@ -86,6 +86,7 @@ def count_view_draws():
             STATE["draw_error"] = traceback.format_exc()
             raise
         STATE["draws"] += 1
+        STATE["mesh_uploads"] = self.snapshots.mesh_uploads
 
     engine.CSMRenderEngine.view_draw = view_draw
 
@@ -289,11 +290,11 @@ def tick():
             log("scene imported, viewport in CSM rendered mode")
             STATE["step"] = "first_draw"
         elif step == "first_draw":
-            from csm_engine.render import gpu_mesh
-            if STATE["draws"] > 0 and gpu_mesh.UPLOADS["count"] > 0:
-                REPORT["mesh_uploads"] = gpu_mesh.UPLOADS["count"]
+            uploads = STATE.get("mesh_uploads", 0)
+            if STATE["draws"] > 0 and uploads > 0:
+                REPORT["mesh_uploads"] = uploads
                 REPORT["timings_s"]["first_draw"] = round(elapsed, 3)
-                log(f"engine drew ({gpu_mesh.UPLOADS['count']} mesh uploads)")
+                log(f"engine drew ({uploads} mesh uploads)")
                 # Whatever the first draw saw, ask for fresh ones with the final view.
                 STATE["draws_at_mark"] = STATE["draws"]
                 STATE["area"].tag_redraw()

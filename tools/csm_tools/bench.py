@@ -20,8 +20,10 @@ How each number is taken:
 - Viewport: what ``CSMRenderEngine.view_draw`` does per redraw, minus the window: the
   snapshot (``engine.ViewportSnapshots``: read again only after a depsgraph update, as
   ``view_update`` reports them), then ``Pipeline.draw`` into an offscreen target.
-  "Python overhead" is the same redraw with the draw and clear calls skipped: snapshot,
-  sync, planning, binding and uniforms.
+  "Python overhead" is the same redraw with the draw and clear calls skipped
+  (``Pipeline.benchmark_skip_gpu_calls``): snapshot, sync, planning, binding and uniforms.
+  Uploads are the viewport's own (``ViewportSnapshots.mesh_uploads``); shadow tiles drawn
+  and kept are summed from ``Pipeline.last_frame`` over the real redraws.
 """
 
 import argparse
@@ -227,7 +229,8 @@ def viewport_cost(scene, width, height, redraws):
     import gpu
     import numpy as np
     from csm_engine.blender import engine, mesh_cache, snapshot
-    from csm_engine.render import gpu_mesh, pipeline
+    from csm_engine.render import pipeline
+    from csm_engine.render.result import PassCounts
 
     cache = mesh_cache.MeshCache()
     renderer = pipeline.Pipeline()
@@ -243,7 +246,7 @@ def viewport_cost(scene, width, height, redraws):
         ``python_only`` skips the draw and clear calls: what is left is the redraw's Python
         (snapshot, cache sync, planning, binding and uniforms), timed without llvmpipe's
         rasteriser threads competing for the two cores."""
-        renderer.skip_gpu_calls = python_only
+        renderer.benchmark_skip_gpu_calls = python_only
         start = time.perf_counter()
         depsgraph = bpy.context.evaluated_depsgraph_get()
         # As view_draw: the scene is read again only after a depsgraph update.
@@ -256,7 +259,7 @@ def viewport_cost(scene, width, height, redraws):
                 if not python_only:
                     fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')   # wait for the GPU
         finally:
-            renderer.skip_gpu_calls = False
+            renderer.benchmark_skip_gpu_calls = False
         return submitted, time.perf_counter() - start
 
     try:
@@ -264,8 +267,8 @@ def viewport_cost(scene, width, height, redraws):
         base = snapshot.camera_from_scene(scene, depsgraph, width, height)
         redraw(base)                       # first redraw uploads everything
         redraw(base)
-        uploads_before = gpu_mesh.UPLOADS["count"]
-        tiles_before = dict(pipeline.SHADOW_TILES)
+        uploads_before = snapshots.mesh_uploads
+        drawn = PassCounts()            # the real redraws' (Python-only ones draw nothing)
         python_s, submit_s, frame_s = [], [], []
         for step in range(redraws):
             # Orbit the view like a viewport drag: only the view matrix changes.
@@ -279,26 +282,27 @@ def viewport_cost(scene, width, height, redraws):
             orbit[:3, 3] = turn @ orbit[:3, 3]
             camera = dataclasses.replace(base, world_from_view=orbit)
             sub, f = redraw(camera)
+            drawn = drawn + renderer.last_frame
             python, _ = redraw(camera, python_only=True)
             python_s.append(python)
             submit_s.append(sub)
             frame_s.append(f)
-        camera_only_uploads = gpu_mesh.UPLOADS["count"] - uploads_before
-        tiles = {k: pipeline.SHADOW_TILES[k] - tiles_before[k] for k in tiles_before}
+        camera_only_uploads = snapshots.mesh_uploads - uploads_before
+        tiles = {"drawn": drawn.shadow_tiles_drawn, "skipped": drawn.shadow_tiles_kept}
 
         # One-object edit: lift one vertex of the first mesh object, as a user's edit would.
         edited = next((o for o in scene.objects if o.type == 'MESH' and o.data.users == 1),
                       None)
         edit = None
         if edited is not None:
-            uploads_before = gpu_mesh.UPLOADS["count"]
+            uploads_before = snapshots.mesh_uploads
             start = time.perf_counter()
             edited.data.vertices[0].co.z += 0.05
             edited.data.update()
             bpy.context.view_layer.update()
             redraw(base)
             edit = {"object": edited.name, "seconds": time.perf_counter() - start,
-                    "uploads": gpu_mesh.UPLOADS["count"] - uploads_before}
+                    "uploads": snapshots.mesh_uploads - uploads_before}
     finally:
         bpy.app.handlers.depsgraph_update_post.remove(handler)
         target.free()

@@ -120,11 +120,11 @@ def test_anti_aliasing_keeps_flat_areas_and_the_aux_passes(edge_scene):
 
 def test_render_samples_draw_the_shadow_maps_once(edge_scene):
     edge_scene.csm.render_samples = 8
-    pipeline.SHADOW_TILES["drawn"] = pipeline.SHADOW_TILES["skipped"] = 0
     result = render_result(edge_scene, WIDTH, HEIGHT)
     cascades = result.plan.cascade_count
-    assert pipeline.SHADOW_TILES["drawn"] <= cascades
-    assert pipeline.SHADOW_TILES["drawn"] + pipeline.SHADOW_TILES["skipped"] == 8 * cascades
+    tiles = result.passes
+    assert tiles.shadow_tiles_drawn <= cascades
+    assert tiles.shadow_tiles_drawn + tiles.shadow_tiles_kept == 8 * cascades
 
 
 def _viewport_frame(scene, fxaa):

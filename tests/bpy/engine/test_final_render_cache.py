@@ -11,7 +11,6 @@ import bpy
 import numpy as np
 
 from csm_engine.blender import engine
-from csm_engine.render import gpu_mesh, pipeline
 from tests.bpy.bpy_helpers import cube_on_plane, render_result
 
 W, H = 96, 64
@@ -36,9 +35,8 @@ def _set_colour(material, rgb):
 
 
 def _render(scene):
-    before = gpu_mesh.UPLOADS["count"]
     result = render_result(scene, W, H)
-    return result.images["combined"].copy(), gpu_mesh.UPLOADS["count"] - before
+    return result.images["combined"].copy(), result.mesh_uploads
 
 
 def _changed(a, b):
@@ -48,11 +46,11 @@ def _changed(a, b):
 def test_unchanged_rerender_uploads_nothing_and_draws_no_shadow_tile(empty_scene):
     scene, cube = _scene(empty_scene)
     first, _ = _render(scene)
-    tiles = dict(pipeline.SHADOW_TILES)
-    again, uploads = _render(scene)
+    result = render_result(scene, W, H)
+    again, uploads = result.images["combined"].copy(), result.mesh_uploads
     assert uploads == 0
-    assert pipeline.SHADOW_TILES["drawn"] == tiles["drawn"]
-    assert pipeline.SHADOW_TILES["skipped"] > tiles["skipped"]
+    assert result.passes.shadow_tiles_drawn == 0
+    assert result.passes.shadow_tiles_kept > 0
     assert _changed(first, again) == 0.0
     cache = engine._final_mesh_cache()
     assert cache.last_sync["read"] == 0 and cache.last_sync["uploaded"] == 0
@@ -118,7 +116,7 @@ def test_animated_shape_key_changes_the_pixels_per_frame(empty_scene):
     assert images[2][1] == 0                 # frame 1's mesh is hashed, not uploaded again
 
 
-def test_animation_render_draws_each_frame(empty_scene, tmp_path):
+def test_animation_render_draws_each_frame(empty_scene, tmp_path, monkeypatch):
     """bpy.ops.render.render(animation=True), with one object moving by keyframes."""
     scene, cube = _scene(empty_scene)
     cube.location = (0, 0, 1.2)
@@ -129,12 +127,20 @@ def test_animation_render_draws_each_frame(empty_scene, tmp_path):
     scene.render.resolution_x, scene.render.resolution_y = W, H
     scene.render.filepath = str(tmp_path / "frame_")
     scene.render.image_settings.file_format = 'PNG'
-    before = gpu_mesh.UPLOADS["count"]
+    # Each frame's RenderResult says what it uploaded (the operator returns none).
+    results = []
+    render = engine.CSMRenderEngine._render
+
+    def recorded(self, depsgraph, request):
+        results.append(render(self, depsgraph, request))
+        return results[-1]
+    monkeypatch.setattr(engine.CSMRenderEngine, "_render", recorded)
     bpy.ops.render.render(animation=True)
     from tests.bpy.bpy_helpers import load_png
     frames = [load_png(tmp_path / f"frame_{n:04d}.png") for n in (1, 2, 3)]
     assert _changed(frames[0], frames[1]) > 0.05 and _changed(frames[1], frames[2]) > 0.05
-    assert gpu_mesh.UPLOADS["count"] - before <= 2     # plane and cube, once
+    assert len(results) == 3
+    assert sum(r.mesh_uploads for r in results) <= 2     # plane and cube, once
 
 
 def test_objects_sharing_a_mesh_upload_it_once(empty_scene):

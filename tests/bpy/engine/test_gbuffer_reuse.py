@@ -19,6 +19,20 @@ from tests.bpy.bpy_helpers import cube_on_plane, render_result, viewport_frame
 W, H = 96, 64
 
 
+class _DrawsWithPlan(pipeline.Pipeline):
+    """A new pipeline (its own textures, records and planning state) that draws ``plan``
+    instead of planning. It is the reference for a kept frame: the same cascades drawn
+    with nothing kept, whatever the planner carried over from the views the kept frame's
+    pipeline drew before (a new view's plan may differ)."""
+
+    def __init__(self, plan):
+        super().__init__()
+        self.plan = plan
+
+    def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False):
+        return self.plan
+
+
 def _scene(empty_scene):
     scene = empty_scene
     cube, sun = cube_on_plane(scene)
@@ -48,18 +62,19 @@ def _set_colour(material, rgba):
 
 def _render(scene):
     """(combined image, whether the G-buffer was kept)."""
-    kept = pipeline.GBUFFERS["kept"]
-    image = render_result(scene, W, H).images["combined"].copy()
-    return image, pipeline.GBUFFERS["kept"] > kept
+    result = render_result(scene, W, H)
+    return result.images["combined"].copy(), result.passes.gbuffers_kept > 0
 
 
 def _render_everything(scene):
-    """The same render with nothing kept from the render before."""
-    for name in ("gbuffer_contents", "ao_contents", "depth_blocks"):
-        engine._FINAL_RENDER_TEXTURES.pop(name, None)
-    image, kept = _render(scene)
-    assert not kept
-    return image
+    """The same render with nothing kept from the render before: every shadow tile (once:
+    jittered samples share them), every G-buffer and its AO drawn afresh."""
+    engine.forget_final_render_passes()
+    result = render_result(scene, W, H)
+    passes = result.passes
+    assert passes.shadow_tiles_drawn == len(result.plan.tiles) > 0
+    assert passes.gbuffers_kept == passes.ao_kept == 0 and passes.gbuffers_drawn > 0
+    return result.images["combined"].copy()
 
 
 def test_unchanged_rerender_keeps_the_gbuffer_and_gives_the_same_pixels(empty_scene):
@@ -133,10 +148,9 @@ def test_edits_that_reach_the_gbuffer_draw_it_again(empty_scene, edit):
     }[edit]
     change()
     if edit == "resolution":
-        kept = pipeline.GBUFFERS["kept"]
-        image = render_result(scene, W + 8, H).images["combined"]
-        assert pipeline.GBUFFERS["kept"] == kept
-        assert image.shape[1] == W + 8
+        result = render_result(scene, W + 8, H)
+        assert result.passes.gbuffers_kept == 0
+        assert result.images["combined"].shape[1] == W + 8
         return
     after, kept = _render(scene)
     # More samples: the first (unjittered) sample's G-buffer is the one held; the others
@@ -208,7 +222,7 @@ def _viewport_frame(scene, renderer, cache):
 def test_viewport_keeps_the_gbuffer_while_shadows_are_tuned(empty_scene):
     """In the viewport too: the second redraw of an unmoved view records the G-buffer, a
     PCF or sun change then keeps it and shows; a moved object draws it again. Every frame
-    equals a fresh pipeline's."""
+    equals a fresh pipeline's with the same shadow plan."""
     from csm_engine.blender import mesh_cache
     scene, cube, sun = _scene(empty_scene)
     _render(scene)                        # a GPU context exists from here on
@@ -219,7 +233,8 @@ def test_viewport_keeps_the_gbuffer_while_shadows_are_tuned(empty_scene):
     renderer = pipeline.Pipeline()
     try:
         def fresh():
-            return _viewport_frame(scene, pipeline.Pipeline(), mesh_cache.MeshCache())
+            return _viewport_frame(scene, _DrawsWithPlan(renderer.last_plan),
+                                   mesh_cache.MeshCache())
 
         _viewport_frame(scene, renderer, cache)
         before = _viewport_frame(scene, renderer, cache)
@@ -229,9 +244,8 @@ def test_viewport_keeps_the_gbuffer_while_shadows_are_tuned(empty_scene):
                             (lambda: setattr(cube, "location", (1.5, 0.5, 1.2)), False)):
             edit()
             bpy.context.view_layer.update()
-            kept = pipeline.GBUFFERS["kept"]
             after = _viewport_frame(scene, renderer, cache)
-            assert (pipeline.GBUFFERS["kept"] > kept) == keeps
+            assert (renderer.last_frame.gbuffers_kept > 0) == keeps
             assert np.abs(after - before).max() > 0.02
             assert np.array_equal(after, fresh())
             before = after

@@ -12,7 +12,7 @@ import bpy
 import numpy as np
 import pytest
 
-from tests.bpy.bpy_helpers import render_scene
+from tests.bpy.bpy_helpers import render_result, render_scene
 from tests.bpy.scenes import (add_box, add_camera, add_ground, add_sun, render_eevee,
                               set_world_color)
 
@@ -191,9 +191,7 @@ def test_only_normal_mapped_meshes_pay_for_tangents(empty_scene):
     top_camera(scene, ortho_scale=6.0)
     from csm_engine.blender import engine
     engine.forget_final_render_meshes()
-    before = dict(gpu_mesh.UPLOADS)
-    render_scene(scene, 32, 16)
-    uploaded = gpu_mesh.UPLOADS["bytes"] - before["bytes"]
+    uploaded = render_result(scene, 32, 16).upload_bytes
     corners, triangles = 4, 2
     plain = corners * gpu_mesh.BYTES_PER_CORNER + triangles * gpu_mesh.BYTES_PER_TRIANGLE
     assert uploaded == 2 * plain + corners * gpu_mesh.BYTES_PER_TANGENT, uploaded

@@ -91,7 +91,6 @@ def test_shared_vertices_draw_the_same_pixels_as_one_vertex_per_corner(empty_sce
     mesh vertex (not one per corner)."""
     from csm_engine.blender import engine
     from csm_engine.core import vertex_sharing
-    from csm_engine.render import gpu_mesh
     from tests.bpy.bpy_helpers import render_result
     from tests.bpy.engine.test_materials import normal_mapped_material
     scene = empty_scene
@@ -114,18 +113,16 @@ def test_shared_vertices_draw_the_same_pixels_as_one_vertex_per_corner(empty_sce
     scene.camera = bpy.context.object
 
     engine.forget_final_render_meshes()
-    before = gpu_mesh.UPLOADS["bytes"]
-    shared = render_result(scene, 160, 120).images["combined"].copy()
-    shared_bytes = gpu_mesh.UPLOADS["bytes"] - before
+    result = render_result(scene, 160, 120)
+    shared, shared_bytes = result.images["combined"].copy(), result.upload_bytes
 
     def one_per_corner(corner_verts, vertex_count, corner_arrays):
         corners = np.arange(len(corner_verts))
         return corners, corners
     monkeypatch.setattr(mesh_cache, "share_vertices", one_per_corner)
     engine.forget_final_render_meshes()
-    before = gpu_mesh.UPLOADS["bytes"]
-    per_corner = render_result(scene, 160, 120).images["combined"]
-    per_corner_bytes = gpu_mesh.UPLOADS["bytes"] - before
+    result = render_result(scene, 160, 120)
+    per_corner, per_corner_bytes = result.images["combined"], result.upload_bytes
     assert np.array_equal(shared, per_corner)
     assert shared_bytes < 0.8 * per_corner_bytes     # flat cube and monkey keep theirs
 

@@ -8,7 +8,6 @@ import bpy
 import numpy as np
 
 from csm_engine.blender import engine, mesh_cache, snapshot
-from csm_engine.render import gpu_mesh
 from tests.bpy.bpy_helpers import render_scene
 
 
@@ -33,12 +32,14 @@ class ViewportStandIn:
         self.handler = lambda scene, depsgraph: engine.apply_depsgraph_updates(
             self.cache, depsgraph.updates)
         bpy.app.handlers.depsgraph_update_post.append(self.handler)
+        self.uploads = 0           # meshes uploaded by this viewport's syncs
 
     def redraw(self):
         depsgraph = bpy.context.evaluated_depsgraph_get()
         camera = snapshot.camera_from_scene(self.scene, depsgraph, 64, 64)
         snap = snapshot.take(depsgraph, camera, is_viewport=True)
         self.cache.sync(snap.mesh_sources)
+        self.uploads += self.cache.last_sync["uploaded"]
         return snap
 
     def close(self):
@@ -52,16 +53,16 @@ def test_moving_an_object_uploads_nothing_and_editing_uploads_one(empty_scene):
     try:
         view.redraw()
         assert set(view.cache.meshes) == {plane.name, cube.name}
-        before = gpu_mesh.UPLOADS["count"]
+        before = view.uploads
 
         for step in range(5):              # camera-only redraws
             view.redraw()
-        assert gpu_mesh.UPLOADS["count"] == before
+        assert view.uploads == before
 
         cube.location.x += 2.0             # a transform change
         bpy.context.view_layer.update()
         snap = view.redraw()
-        assert gpu_mesh.UPLOADS["count"] == before
+        assert view.uploads == before
         moved = [i for i in snap.instances if i.key == cube.name][0]
         assert moved.world_from_object[0, 3] == 2.0
 
@@ -70,7 +71,7 @@ def test_moving_an_object_uploads_nothing_and_editing_uploads_one(empty_scene):
         cube.data.update()
         bpy.context.view_layer.update()
         view.redraw()
-        assert gpu_mesh.UPLOADS["count"] == before + 1
+        assert view.uploads == before + 1
         assert view.cache.meshes[cube.name].aabb_max[2] > 1.5
     finally:
         view.close()

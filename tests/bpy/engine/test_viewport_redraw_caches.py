@@ -4,7 +4,8 @@ edit shows in the very next redraw.
 
 One long-lived pipeline and mesh cache (fed the depsgraph's updates, as ``view_update``
 does) redraw after each edit; every frame must equal a fresh pipeline's and fresh cache's
-frame of the same scene, and the edit must have changed the picture.
+frame of the same scene with the same shadow plan, and the edit must have changed the
+picture.
 """
 import bpy
 import numpy as np
@@ -14,6 +15,20 @@ from csm_engine.render import pipeline
 from tests.bpy.bpy_helpers import render_scene, viewport_frame
 
 W, H = 96, 64
+
+
+class _DrawsWithPlan(pipeline.Pipeline):
+    """A new pipeline (its own textures, records and planning state) that draws ``plan``
+    instead of planning. It is the reference for a kept frame: the same cascades drawn
+    with nothing kept, whatever the planner carried over from the views the kept frame's
+    pipeline drew before (a new view's plan may differ)."""
+
+    def __init__(self, plan):
+        super().__init__()
+        self.plan = plan
+
+    def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False):
+        return self.plan
 
 
 def _scene(empty_scene):
@@ -80,7 +95,8 @@ def test_every_edit_shows_in_the_next_redraw(empty_scene):
             change()
             bpy.context.view_layer.update()
             kept = _frame(scene, view.pipeline, view.cache)
-            fresh = _frame(scene, pipeline.Pipeline(), mesh_cache.MeshCache())
+            fresh = _frame(scene, _DrawsWithPlan(view.pipeline.last_plan),
+                           mesh_cache.MeshCache())
             assert np.abs(kept - fresh).max() < 1e-5, f"{name}: the kept frame is stale"
             assert np.abs(kept - before).max() > 1e-3, f"{name}: the edit does not show"
             before = kept

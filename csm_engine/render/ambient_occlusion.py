@@ -1,0 +1,67 @@
+"""The ambient-occlusion pass: a half-resolution horizon search over the G-buffer and a
+depth-aware blur (``ao_frag.glsl``), which the lighting pass brings to full resolution.
+
+Owns the two half-resolution AO targets and the record of what the blurred one holds (the
+frame cache's ``ambient_occlusion``): with the G-buffer kept from the frame before and the
+same AO inputs, the AO drawn then is kept too. Off (or at strength or distance 0), nothing
+is allocated or drawn.
+"""
+
+from typing import NamedTuple
+
+from ..core.frame_layout import FRAME_LAYOUT
+from . import shaders
+from .gbuffer import programs_key
+from .resources import HeldAmbientOcclusion
+
+# What the AO passes read of the frame block besides the G-buffer (ao_frag.glsl).
+_AO_FRAME_FIELDS = ("ao_enabled", "ao_distance", "ao_strength", "ao_pixels_per_unit",
+                    "ao_view_ray", "is_perspective", "viewport_size", "view_from_world")
+
+
+class AmbientOcclusion(NamedTuple):
+    texture: object         # half resolution, RG: AO (1 open, 0 occluded), view depth
+    framebuffer: object
+    kept: bool              # the one drawn for the G-buffer kept from the frame before
+
+
+def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffer_kept,
+                           width, height):
+    """The AO of ``gbuffer`` (``gbuffer.GBuffer``: its view depth and normals) with the
+    frame block ``frame_ubo`` (``frame_data`` as numpy); None when AO is off."""
+    import gpu
+    settings = snap.settings
+    if not settings.ambient_occlusion or settings.ao_strength <= 0.0 or \
+            settings.ao_distance <= 0.0:
+        return None
+    half_size = ((width + 1) // 2, (height + 1) // 2)
+    search = targets.texture("ao_half", half_size, 'RG32F')
+    blurred = targets.texture("ao", half_size, 'RG32F')
+    search_fb = targets.framebuffer("ao_half", colors=(search,))
+    blurred_fb = targets.framebuffer("ao", colors=(blurred,))
+    library = shaders.LIBRARY
+    inputs = (programs_key(), FRAME_LAYOUT.field_bytes(frame_data, _AO_FRAME_FIELDS))
+    frame_cache = targets.frame_cache
+    held = frame_cache.ambient_occlusion
+    if gbuffer_kept and held is not None and held.texture is blurred and \
+            held.inputs == inputs:
+        return AmbientOcclusion(blurred, blurred_fb, True)
+    frame_cache.ambient_occlusion = None
+    for program, fb, extra in (("ao", search_fb, ()),
+                               ("ao_blur", blurred_fb, (("ao_half", search),))):
+        shader = library.get(program)
+        with fb.bind():
+            gpu.state.viewport_set(0, 0, *half_size)
+            gpu.state.depth_test_set('NONE')
+            gpu.state.depth_mask_set(False)
+            shader.bind()
+            shader.uniform_block("frame", frame_ubo)
+            if program == "ao":
+                shader.uniform_sampler("gbuffer_depth", gbuffer.view_depth)
+            shader.uniform_sampler("gbuffer_normal", gbuffer.normal)
+            for name, texture in extra:
+                shader.uniform_sampler(name, texture)
+            targets.call(targets.fullscreen_batch().draw, shader)
+    if targets.records:
+        frame_cache.ambient_occlusion = HeldAmbientOcclusion(blurred, inputs)
+    return AmbientOcclusion(blurred, blurred_fb, False)

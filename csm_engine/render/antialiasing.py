@@ -1,0 +1,107 @@
+"""Anti-aliasing: FXAA over the viewport's lit image, and a final render's FXAA or
+jittered samples averaged into a running mean.
+
+Owns ``draw_viewport_fxaa`` and ``draw_antialiased``, which drive ``Pipeline.draw`` for
+each sample with a snapshot of their own (the jittered camera and sample index; the
+caller's snapshot is never changed), and the frozen-cascade overlays after anti-aliasing,
+so 1-pixel lines stay crisp. Sample offsets and weights come from core/antialiasing.py.
+"""
+
+import dataclasses
+import time
+from typing import NamedTuple
+
+from ..core.antialiasing import jittered, sample_offsets
+from . import shaders
+from .overlays import draw_frozen_cascades, draw_overlays
+
+
+class Antialiased(NamedTuple):
+    plan: object            # the shadow plan of the first sample, shared by the others
+    combined_fb: object     # holds the Combined image in colour slot 0
+    timings: dict           # the samples' passes summed, plus "fxaa" or "antialiasing"
+    passes: object          # PassCounts summed over the samples
+
+
+def draw_viewport_fxaa(pipeline, snap, cache, width, height):
+    """A viewport frame into the bound framebuffer through FXAA: the lit image goes to an
+    offscreen target first, and FXAA writes it to the screen. Returns the plan."""
+    import gpu
+    targets = pipeline.targets
+    blend = gpu.state.blend_get() if hasattr(gpu.state, "blend_get") else 'NONE'
+    lit = targets.texture("lit", (width, height), 'RGBA16F')
+    lit_fb = targets.framebuffer("lit", depth=targets.gbuffer_depth(width, height),
+                                 colors=(lit,))
+    gpu.state.blend_set('NONE')
+    plan = pipeline.draw(snap, cache, lit_fb, width, height, overlays=False,
+                         depth_tested=True)
+    t = time.perf_counter()
+    shader = shaders.LIBRARY.get("fxaa")
+    gpu.state.viewport_set(0, 0, width, height)
+    gpu.state.depth_test_set('NONE')
+    gpu.state.blend_set(blend)
+    shader.bind()
+    shader.uniform_sampler("source", lit)
+    targets.call(targets.fullscreen_batch().draw, shader)
+    pipeline.timings["fxaa"] = time.perf_counter() - t
+    if plan.frozen_camera is not None:
+        draw_frozen_cascades(snap, plan)
+    return plan
+
+
+def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux):
+    """Final-render anti-aliasing into ``color`` (Combined) and ``aux`` (the auxiliary
+    passes): FXAA on one sample, or ``samples`` jittered frames averaged into a running
+    mean. Sample 0 is unjittered and writes ``aux``; later samples reuse its shadow plan,
+    so the shadow maps are drawn once. Returns ``Antialiased``."""
+    targets = pipeline.targets
+    width, height = snap.camera.width, snap.camera.height
+    lit = targets.texture("lit_final", (width, height), 'RGBA32F')
+    depth = targets.gbuffer_depth(width, height)
+    first_fb = targets.framebuffer("lit_first", depth=depth, colors=(lit, aux))
+    started = time.perf_counter()
+    plan = pipeline.draw(snap, cache, first_fb, width, height, overlays=False,
+                         depth_tested=True)
+    passes = pipeline.last_frame
+    timings = dict(pipeline.timings)
+    color_fb = targets.framebuffer("final_color_only", colors=(color,))
+    t = time.perf_counter()
+    if use_fxaa:
+        targets.fullscreen_pass("fxaa", color_fb, width, height, (("source", lit),))
+        draw_overlays(snap, plan, color_fb, width, height)
+        timings["fxaa"] = time.perf_counter() - t
+        timings["total"] = timings.get("total", 0.0) + timings["fxaa"]
+        return Antialiased(plan, color_fb, timings, passes)
+    # A running mean ping-pongs between the final colour target and a second one.
+    offsets, weights = sample_offsets(samples, snap.pixel_filter_width)
+    spare = targets.texture("accumulate", (width, height), 'RGBA32F')
+    spare_fb = targets.framebuffer("accumulate", colors=(spare,))
+    scratch_aux = targets.texture("lit_aux_scratch", (width, height), 'RGBA32F')
+    sample_fb = targets.framebuffer("lit_sample", depth=depth, colors=(lit, scratch_aux))
+    targets.fullscreen_pass("accumulate", color_fb, width, height,
+                            (("previous", lit), ("current", lit)), (("sample_share", 1.0),))
+    accumulating = time.perf_counter() - t
+    mean, mean_fb, other, other_fb = color, color_fb, spare, spare_fb
+    total = weights[0]
+    for index, (offset, weight) in enumerate(zip(offsets[1:], weights[1:]), start=1):
+        sample = dataclasses.replace(snap, camera=jittered(snap.camera, offset),
+                                     sample_index=index)
+        pipeline.draw(sample, cache, sample_fb, width, height, plan=plan, overlays=False,
+                      depth_tested=True)
+        passes = passes + pipeline.last_frame
+        for name, value in pipeline.timings.items():
+            if name != "total":
+                timings[name] = timings.get(name, 0.0) + value
+        total += weight
+        t = time.perf_counter()
+        targets.fullscreen_pass("accumulate", other_fb, width, height,
+                                (("previous", mean), ("current", lit)),
+                                (("sample_share", float(weight / total)),))
+        accumulating += time.perf_counter() - t
+        mean, mean_fb, other, other_fb = other, other_fb, mean, mean_fb
+    # The samples' own passes are added into shadow/gbuffer/lighting above; this step
+    # is the averaging alone.
+    timings["antialiasing"] = accumulating
+    timings["total"] = time.perf_counter() - started
+    draw_overlays(snap, plan, mean_fb, width, height)
+    return Antialiased(plan, mean_fb, timings, passes)

@@ -1,0 +1,359 @@
+"""What a frame draws, per instance, ready for the passes: draw lists and instance arrays.
+
+Owns ``MeshDraws`` (one mesh's batches, split by the programs that draw them), the
+``DrawMaterial`` of each material slot (uniform block, textures, the keys a kept shadow
+tile or G-buffer records of it), ``DrawLists`` (what the passes derive from one frame's
+draws), ``InstanceArrays`` (world matrices and bounds) and ``HeldDrawLists``, which keeps
+all of them from one frame to the next while the meshes, materials and textures are the
+same. Reads the ``MeshCache``'s GPU meshes and textures; draws nothing.
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+
+from ..core import cascades
+from ..core.material_layout import pack_material
+from ..core.shadow_plan import instance_bounds
+from .gpu_mesh import MaterialInfo
+
+
+def column_major(matrix):
+    return np.asarray(matrix, dtype=np.float32).T.ravel().tolist()
+
+
+def column_major_stack(matrices):
+    """(N, 4, 4) matrices -> N lists of 16 floats in GLSL's column-major order."""
+    matrices = np.asarray(matrices, dtype=np.float32)
+    return matrices.transpose(0, 2, 1).reshape(len(matrices), 16).tolist()
+
+
+class InstanceArrays:
+    """Per-instance arrays of one frame, kept while the instances are the same (viewport
+    redraws that only move the view): world matrices (N, 4, 4), the same as GLSL lists,
+    which are mirrored, the world AABBs (``instance_bounds``) and, for the last sun
+    rotation culled against, the boxes in its frame (``cascades.boxes_in_light_frame``)."""
+    __slots__ = ("keys", "meshes", "matrix_bytes", "world_from_objects",
+                 "world_from_objects_gl", "mirrored", "bounds_lo_hi", "bounds_checked",
+                 "light_frame_boxes")
+
+    def __init__(self, snap, cache, keys, meshes, world_from_objects):
+        self.keys, self.meshes = keys, meshes
+        self.world_from_objects = world_from_objects
+        self.matrix_bytes = world_from_objects.tobytes()
+        self.world_from_objects_gl = column_major_stack(world_from_objects)
+        # Negative scale turns a triangle's winding around: back-face culling of a mirrored
+        # instance culls its front-wound faces.
+        self.mirrored = np.linalg.det(world_from_objects[:, :3, :3]) < 0.0
+        self.bounds_lo_hi = instance_bounds(snap.instances, cache.meshes)
+        # Checked once here, not again for every cascade's culling (``shadow_atlas``).
+        self.bounds_checked = self.bounds_lo_hi is not None and \
+            cascades.boxes_are_valid(*self.bounds_lo_hi)
+        self.light_frame_boxes = (None, None)     # (rotation bytes, boxes in its frame)
+
+    def holds(self, keys, meshes, world_from_objects):
+        """Whether these arrays are those of ``keys`` drawn with ``meshes`` (GPUMesh or
+        None per instance: a re-upload is a new object, so new bounds) at these matrices."""
+        return (keys == self.keys and len(meshes) == len(self.meshes)
+                and all(a is b for a, b in zip(meshes, self.meshes))
+                and world_from_objects.tobytes() == self.matrix_bytes)
+
+    @property
+    def scene_bounds(self):
+        """(lo, hi) of every instance's world AABB, or None without instances."""
+        if self.bounds_lo_hi is None:
+            return None
+        return self.bounds_lo_hi[0].min(axis=0), self.bounds_lo_hi[1].max(axis=0)
+
+
+# The G-buffer programs' material samplers, in DrawMaterial.textures order.
+MATERIAL_SAMPLERS = ("base_color_texture", "normal_texture", "emission_texture",
+                     "surface_texture")
+
+
+class DrawMaterial:
+    """One material slot ready to draw: its uniform buffer, its four textures (white where
+    there is none, see MATERIAL_SAMPLERS), alpha and shadow modes, culling, and the keys a
+    shadow tile and a kept G-buffer record of it."""
+    __slots__ = ("block", "textures", "textured", "writes_emission", "alpha_mode",
+                 "shadow_mode", "backface_culling", "backface_culling_shadow", "shadow_key",
+                 "gbuffer_key")
+
+    def __init__(self, block, textures, textured, writes_emission, alpha_mode, shadow_mode,
+                 backface_culling, backface_culling_shadow, shadow_key, gbuffer_key):
+        self.block, self.textures, self.textured = block, textures, textured
+        self.writes_emission = writes_emission
+        self.alpha_mode, self.shadow_mode = alpha_mode, shadow_mode
+        self.backface_culling = backface_culling
+        self.backface_culling_shadow = backface_culling_shadow
+        self.shadow_key = shadow_key
+        self.gbuffer_key = gbuffer_key
+
+
+class MeshDraws(NamedTuple):
+    """One mesh's draws, each a (GPUBatch, DrawMaterial), by the programs that draw them.
+    Instances of one mesh share one ``MeshDraws``."""
+    textured: list          # camera, opaque, material with images
+    masked: list            # camera, alpha-tested (Clip, Hashed)
+    shadow_opaque: list     # shadow casters, opaque
+    shadow_masked: list     # shadow casters, alpha-tested
+    has_tangents: bool      # the mesh's vertices carry tangents (normal maps)
+    untextured: list        # camera, opaque, material without images
+
+
+class GBufferProgram(NamedTuple):
+    """One of the G-buffer's draws: the program, the ``MeshDraws`` list it draws, whether
+    the mesh must have tangents (None: either), whether it samples the material's
+    textures."""
+    program: str
+    draws: str
+    tangents: object
+    textured: bool
+
+
+# The G-buffer's draws in order: opaque before alpha-tested.
+# NOTE: llvmpipe samples a texture even where the shader's `if` skips it, so materials
+# without images use a program that has no texture reads (about a third of the G-buffer's
+# time here); it is given no textures either (four binds per material a frame).
+GBUFFER_PROGRAMS = (GBufferProgram("gbuffer_untextured", "untextured", None, False),
+                    GBufferProgram("gbuffer", "textured", False, True),
+                    GBufferProgram("gbuffer_tangent", "textured", True, True),
+                    GBufferProgram("gbuffer_masked", "masked", False, True),
+                    GBufferProgram("gbuffer_masked_tangent", "masked", True, True))
+
+
+class CasterSignature(NamedTuple):
+    """What one mesh's shadow depends on besides its matrix: the geometry (``GPUMesh.serial``,
+    never reused, unlike ``id()``) and its shadow materials' ``shadow_key``s."""
+    serial: int
+    material_keys: tuple
+
+
+def _writes_emission(items):
+    """Whether any camera draw of ``items`` has emission or metallic, i.e. needs the
+    G-buffer's emission target. Instances of one mesh share their ``MeshDraws``, so each is
+    looked at once."""
+    seen = set()
+    for entry in items:
+        if id(entry) in seen:
+            continue
+        seen.add(id(entry))
+        for draws in (entry.textured, entry.masked, entry.untextured):
+            for _batch, material in draws:
+                if material.writes_emission:
+                    return True
+    return False
+
+
+class DrawLists:
+    """What the passes derive from one frame's ``MeshDraws`` per instance (``items``), kept
+    with them: the same items give the same answers. Per instance: whether each of
+    GBUFFER_PROGRAMS and each shadow program (opaque, alpha-masked) draws it."""
+    __slots__ = ("items", "writes_emission", "gbuffer_masks", "shadow_masks", "partial_mask",
+                 "signatures")
+
+    def __init__(self, items):
+        self.items = items
+        self.writes_emission = _writes_emission(items)
+        self.gbuffer_masks = tuple(
+            np.array([bool(getattr(entry, program.draws)) and
+                      (program.tangents is None or entry.has_tangents == program.tangents)
+                      for entry in items], dtype=bool)
+            for program in GBUFFER_PROGRAMS)
+        self.shadow_masks = tuple(np.array([bool(draws) for draws in column], dtype=bool)
+                                  for column in ([entry.shadow_opaque for entry in items],
+                                                 [entry.shadow_masked for entry in items]))
+        # Which instances have an alpha-hashed shadow material (the atlas's partial-caster
+        # mask draws only those).
+        self.partial_mask = np.array([any(material.shadow_mode == 'HASHED'
+                                          for _batch, material in entry.shadow_masked)
+                                      for entry in items], dtype=bool)
+        # Per instance: CasterSignature, or None when a masked draw reads an image (see
+        # HeldDrawLists.caster_signatures); made when the shadow pass first asks.
+        self.signatures = None
+
+
+def _same_textures(cache, textures):
+    """Whether the mesh cache still gives each image of ``textures`` ((image, GPU texture
+    or False) pairs) the texture it gave when they were recorded."""
+    try:
+        return all(cache.textures.get(image.name) is texture for image, texture in textures)
+    except ReferenceError:      # an image removed since
+        return False
+
+
+class HeldDrawLists:
+    """One view's draw lists and instance arrays, kept from the frame before while they
+    would come out the same."""
+
+    def __init__(self):
+        self._instances = None      # InstanceArrays of the last frame
+        self._draws = None          # the last frame's MeshDraws and what they came from
+        self._lists = None          # DrawLists of the last frame's MeshDraws
+        self._signatures = {}       # instance key -> (MeshDraws, CasterSignature or None)
+        # Slots without a material draw as Blender's default grey. Its uniform block lives
+        # with this view, never in module state: a GPU object still alive when Python
+        # exits is freed after the GPU context is gone, which crashes.
+        self._default_material = MaterialInfo()
+
+    def instances(self, snap, cache):
+        """This frame's ``InstanceArrays``: the last frame's when the instances, their
+        meshes and matrices are the same, else new ones."""
+        instances = snap.instances
+        keys = tuple(i.key for i in instances)
+        meshes = [cache.meshes.get(key) for key in keys]
+        world_from_objects = np.array([i.world_from_object for i in instances],
+                                      dtype=np.float64).reshape(-1, 4, 4)
+        held = self._instances
+        if held is None or not held.holds(keys, meshes, world_from_objects):
+            held = self._instances = InstanceArrays(snap, cache, keys, meshes,
+                                                    world_from_objects)
+        return held
+
+    def lists(self, snap, cache, white):
+        """This frame's ``DrawLists`` (``white``: the texture for slots without an image)."""
+        items = self._kept_draw_items(snap, cache, white)
+        if self._lists is None or self._lists.items is not items:
+            self._lists = DrawLists(items)
+        return self._lists
+
+    def caster_signatures(self, snap, cache, lists):
+        """Per instance, its ``CasterSignature``; None when a masked draw reads an image,
+        which never equals a held signature: the image may have been edited in place.
+        Asked for once per ``DrawLists``."""
+        if lists.signatures is not None:
+            return lists.signatures
+        per_key = {}
+        signatures = []
+        # A mesh's signature is kept with its draw lists: the same lists (the same object)
+        # have the same signature.
+        held = self._signatures
+        kept = {}
+        for instance, entry in zip(snap.instances, lists.items):
+            if instance.key not in per_key:
+                known = held.get(instance.key)
+                if known is not None and known[0] is entry:
+                    signature = known[1]
+                else:
+                    mesh = cache.meshes.get(instance.key)
+                    keys = tuple(material.shadow_key for _b, material in
+                                 entry.shadow_opaque + entry.shadow_masked)
+                    signature = CasterSignature(mesh.serial if mesh is not None else 0, keys)
+                    if None in keys:
+                        signature = None
+                per_key[instance.key] = signature
+                kept[instance.key] = (entry, signature)
+            signatures.append(per_key[instance.key])
+        self._signatures = kept
+        lists.signatures = signatures
+        return signatures
+
+    def _kept_draw_items(self, snap, cache, white):
+        """``_draw_items``, kept from the last frame while it would come out the same: the
+        same meshes (a re-upload is a new GPUMesh), the same MaterialInfo lists (a material
+        edit makes new ones, see MeshCache.sync) and, for every image, the same GPU texture
+        (an edited image's texture is dropped from the cache)."""
+        keys = tuple(instance.key for instance in snap.instances)
+        held = self._draws
+        if held is not None and held[0] == keys and held[1] is white and \
+                all(cache.meshes.get(key) is mesh and
+                    (mesh is None or mesh.materials is materials)
+                    for key, mesh, materials in held[2]) and _same_textures(cache, held[3]):
+            return held[4]
+        items = _draw_items(snap, cache, white, self._default_material)
+        meshes = [(key, cache.meshes.get(key)) for key in dict.fromkeys(keys)]
+        textures = tuple((image, cache.textures.get(image.name))
+                         for _key, mesh in meshes if mesh is not None
+                         for info in mesh.materials
+                         for image in (info.image, info.normal_image, info.emission_image,
+                                       info.surface_image)
+                         if image is not None)
+        self._draws = (keys, white, [(key, mesh, mesh.materials if mesh is not None
+                                      else None) for key, mesh in meshes],
+                       textures, items)
+        return items
+
+
+def _draw_items(snap, cache, white, default_material):
+    """Per instance, its mesh's ``MeshDraws``. Instances of one mesh share them, and slots
+    of one material share its ``DrawMaterial`` (so the G-buffer binds a material shared by
+    many objects once)."""
+    per_mesh = {}
+    per_material = {}
+    items = []
+    for instance in snap.instances:
+        entry = per_mesh.get(instance.key)
+        if entry is None:
+            mesh = cache.meshes.get(instance.key)
+            entry = MeshDraws([], [], [], [], bool(mesh is not None and mesh.has_tangents), [])
+            for batch, slot in (mesh.batches if mesh is not None else ()):
+                material = _material(cache, mesh, slot, white, default_material,
+                                     per_material)
+                camera = entry.masked if material.alpha_mode != 'OPAQUE' else \
+                    (entry.textured if material.textured else entry.untextured)
+                camera.append((batch, material))
+                if material.shadow_mode != 'NONE':
+                    shadow = entry.shadow_opaque if material.shadow_mode == 'OPAQUE' \
+                        else entry.shadow_masked
+                    shadow.append((batch, material))
+            per_mesh[instance.key] = entry
+        items.append(entry)
+    return items
+
+
+def _material(cache, mesh, slot, white, default_material, memo=None):
+    """One material slot as both the shadow and G-buffer passes draw it: its uniform
+    block (made once per MaterialInfo and set of loadable textures, kept on it),
+    textures (white where there is none) and settings."""
+    import gpu
+    material = mesh.materials[slot] if slot < len(mesh.materials) else None
+    if material is None:
+        material = default_material
+    if memo is not None:
+        # Keyed by identity: MaterialInfo objects live in the meshes' lists meanwhile.
+        held = memo.get(id(material))
+        if held is None:
+            held = memo[id(material)] = _material(cache, mesh, slot, white,
+                                                  default_material)
+        return held
+    images = (material.image, material.normal_image, material.emission_image,
+              material.surface_image)
+    textures = tuple(cache.texture(image) if image is not None else None
+                     for image in images)
+    loaded = tuple(texture is not None for texture in textures)
+    held = material.gpu_block
+    if held is None or held[0] != loaded:
+        shadow_alpha = material.shadow_mode if material.shadow_mode in \
+            ('CLIP', 'HASHED') else 'OPAQUE'
+        block = pack_material({
+            "base_color": material.base_color, "emission": material.emission,
+            "metallic": material.metallic, "roughness": material.roughness,
+            "specular_level": material.specular_level,
+            "normal_strength": material.normal_strength,
+            "alpha_cutoff": material.alpha_cutoff, "alpha_mode": material.alpha_mode,
+            "shadow_alpha_mode": shadow_alpha,
+            "has_base_texture": int(loaded[0]), "has_normal_texture": int(loaded[1]),
+            "has_emission_texture": int(loaded[2]),
+            "surface_convention": material.surface_convention,
+            "roughness_channel": material.roughness_channel if loaded[3] else -1,
+            "metallic_channel": material.metallic_channel if loaded[3] else -1})
+        held = (loaded, gpu.types.GPUUniformBuf(block.tobytes()), shadow_alpha,
+                block.tobytes())
+        material.gpu_block = held
+    # What a shadow tile drawn with this material depends on; None when it reads an
+    # image, which may have been edited in place.
+    shadow_key = (held[2], material.base_color[3], material.alpha_cutoff,
+                  material.backface_culling_shadow)
+    if held[2] != 'OPAQUE' and loaded[0]:
+        shadow_key = None
+    writes_emission = bool(loaded[2] or max(material.emission) > 0.0 or
+                           material.metallic > 0.0 or
+                           (loaded[3] and material.metallic_channel >= 0))
+    # What a G-buffer drawn with this material depends on; None when it reads an
+    # image (painted or reloaded in place, it keeps its name and texture).
+    gbuffer_key = None if any(loaded) else \
+        (held[3], material.alpha_mode, material.backface_culling)
+    return DrawMaterial(held[1], tuple(t or white for t in textures), any(loaded),
+                        writes_emission, material.alpha_mode, material.shadow_mode,
+                        material.backface_culling, material.backface_culling_shadow,
+                        shadow_key, gbuffer_key)

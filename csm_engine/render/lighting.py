@@ -1,0 +1,79 @@
+"""The lighting pass: one full-screen pass reading the G-buffer, the shadow atlas and the
+AO into the target (``lighting_frag.glsl``), with the debug views.
+
+Owns the choice of lighting program for a frame (``lighting_program``) and its draw
+(``draw_lighting``), including the background where the G-buffer shows none.
+"""
+
+from . import shaders
+from .overlays import draw_frozen_cascades
+
+# The lighting program of each Shadow Filter setting (shaders.py builds one per filter).
+LIGHTING_PROGRAMS = {"HARD": "lighting_hard", "PCF": "lighting", "SOFT": "lighting_soft"}
+
+
+def lighting_program(snap):
+    """The lighting program for this frame: its Shadow Filter's, with the point- and
+    spot-light loops only when the scene has such lights and the debug views only when one
+    is shown (shaders.py: llvmpipe pays for code a frame does not use)."""
+    settings = snap.settings
+    debug = settings.debug_view != "NONE" or bool(settings.debug_inset)
+    point_shadows = bool(snap.points) and snap.points[0].casts_shadow
+    return (LIGHTING_PROGRAMS.get(settings.shadow_filter, "lighting") +
+            ("_points" if snap.points else "") +
+            ("_point_shadows" if point_shadows else "") + ("_spots" if snap.spots else "") +
+            ("_debug" if debug else ""))
+
+
+def draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlusion,
+                  target_fb, width, height, depth_tested=False, overlays=True):
+    """Shade ``gbuffer`` (``gbuffer.GBuffer``) with the shadow ``atlas``
+    (``shadow_atlas.ShadowAtlas``) and ``ambient_occlusion`` (its ``AmbientOcclusion`` or
+    None) into ``target_fb`` (None: the bound framebuffer). ``depth_tested``: the target
+    has the G-buffer's depth attached. ``overlays``: then draw ``plan``'s frozen
+    cascades."""
+    import gpu
+    library = shaders.LIBRARY
+    program = lighting_program(snap)
+    lighting = library.get(program)
+    # NOTE: with the G-buffer's depth attached to the target (``depth_tested``), the
+    # lighting pass runs only where a surface is (its triangle lies on the far plane:
+    # depth test GREATER), and a trivial program gives the background its colour (LESS
+    # or EQUAL): llvmpipe skips the shading of pixel blocks that fail an early depth
+    # test, so sky pixels stop paying for the whole lighting shader. The debug views
+    # draw the shadow map over the background too, so they keep the plain pass.
+    depth_tested = depth_tested and not program.endswith("_debug")
+    ao_texture = targets.white() if ambient_occlusion is None else ambient_occlusion.texture
+
+    def light_pass():
+        gpu.state.viewport_set(0, 0, width, height)
+        gpu.state.depth_mask_set(False)
+        if depth_tested:
+            background = library.get("background")
+            gpu.state.depth_test_set('LESS_EQUAL')
+            background.bind()
+            background.uniform_block("frame", frame_ubo)
+            targets.call(targets.fullscreen_batch().draw, background)
+            gpu.state.depth_test_set('GREATER')
+        else:
+            gpu.state.depth_test_set('NONE')
+        lighting.bind()
+        lighting.uniform_block("frame", frame_ubo)
+        lighting.uniform_sampler("gbuffer_albedo", gbuffer.albedo)
+        lighting.uniform_sampler("gbuffer_normal", gbuffer.normal)
+        lighting.uniform_sampler("gbuffer_depth", gbuffer.view_depth)
+        lighting.uniform_sampler("shadow_atlas", atlas.depth)
+        lighting.uniform_sampler("shadow_partial", atlas.partial)
+        lighting.uniform_sampler("ambient_occlusion", ao_texture)
+        lighting.uniform_sampler("gbuffer_emission", gbuffer.emission)
+        lighting.uniform_sampler("gbuffer_facet", gbuffer.facet)
+        targets.call(targets.fullscreen_batch().draw, lighting)
+        gpu.state.depth_test_set('NONE')
+        if overlays and plan.frozen_camera is not None:
+            draw_frozen_cascades(snap, plan)
+
+    if target_fb is None:
+        light_pass()
+    else:
+        with target_fb.bind():
+            light_pass()
