@@ -137,11 +137,12 @@ def test_the_model_holds_no_mutable_module_state():
 
 def test_no_setting_default_is_restated_outside_the_model():
     """Defaults exist once: nothing reads a setting with a fallback value of its own."""
+    package = Path(settings_model.__file__).resolve().parents[1]
     names = "|".join(settings_model.BY_IDENTIFIER)
     restated = re.compile(r"getattr\(\s*[\w.]+\s*,\s*['\"](%s)['\"]\s*," % names)
-    found = [f"{path.relative_to(Path(settings_model.__file__).resolve().parents[1])}:{text.count(chr(10), 0, match.start()) + 1} "
+    found = [f"{path.relative_to(package)}:{text.count(chr(10), 0, match.start()) + 1} "
              f"{match.group(1)}"
-             for path in sorted(Path(settings_model.__file__).resolve().parents[1].rglob("*.py"))
+             for path in sorted(package.rglob("*.py"))
              for text in [path.read_text(encoding="utf-8")]
              for match in restated.finditer(text)]
     assert not found, found
