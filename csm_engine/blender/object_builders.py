@@ -6,7 +6,7 @@ object's transform (``add_mesh_file``) and linked copies of them for further ref
 the same file (``add_linked_copy``); the sun (``add_sun``), point lights
 (``add_point_light``), the file's camera or a default view of the whole scene
 (``add_camera``, ``add_default_camera``) and a sky World for scenes without one
-(``ensure_world``); and the scene's bounds the sun and default camera are placed from.
+(``ensure_world``, or always for a replaced scene); and the scene's bounds the sun and default camera are placed from.
 Running importers is ``mesh_importers``'s part, the transaction ``scene_builder``'s.
 """
 
@@ -236,8 +236,9 @@ def add_default_camera(collection, bounds, name):
 DEFAULT_SKY_COLOR = (0.12, 0.16, 0.22)
 
 
-def ensure_world(scene):
-    if scene.world is not None:
+def ensure_world(scene, replace=False):
+    """Give ``scene`` the CSM sky; a World it already has stays unless ``replace``."""
+    if scene.world is not None and not replace:
         return      # the user's own World (and ambient) stays as it is
     world = bpy.data.worlds.new("CSM Sky")
     world.color = DEFAULT_SKY_COLOR

@@ -68,7 +68,11 @@ def test_light_properties_have_tooltips_with_units():
     props = light_controls.CSMLightControls.bl_rna.properties
     assert "degrees" in props["sun_azimuth"].description
     assert "degrees" in props["sun_elevation"].description
-    assert "per second" in props["fly_speed_factor"].description
+    assert "metres per second" in props["fly_speed"].description
+    assert props["fly_speed"].unit == 'VELOCITY'
+    assert "per second" in props["fly_turn_speed"].description
+    assert props["fly_turn_speed"].subtype == 'ANGLE'
+    assert props["fly_turn_speed"].unit == 'ROTATION'
 
 
 def _addon_items():
