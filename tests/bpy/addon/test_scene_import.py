@@ -651,6 +651,7 @@ def test_import_operator_reports_errors_and_cancels(scene, workdir, operators_re
     # The operator itself returns CANCELLED with that one report.
     operator = _Reports()
     operator.filepath = bad
+    operator.mode = 'REPLACE'
     result = operators_registered.CSM_OT_import_scene.execute(operator, bpy.context)
     assert result == {'CANCELLED'}
     assert operator.reports == [({'ERROR'}, str(info.value).strip()[len("Error: "):])]
