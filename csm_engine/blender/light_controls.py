@@ -22,6 +22,7 @@ from bpy.props import FloatProperty, FloatVectorProperty
 from mathutils import Matrix, Vector
 
 from ..core.controls import azimuth_elevation_from_travel, travel_from_azimuth_elevation
+from .scene_builder import imported_collections
 
 # Fallback direction when the scene has no sun: light coming straight down.
 _NO_SUN_TRAVEL = (0.0, 0.0, -1.0)
@@ -58,7 +59,6 @@ def sun_object(scene, view_layer=None):
     active = view_layer.objects.active
     if active is not None and usable(active):
         return active
-    from .scene_builder import imported_collections   # bpy-heavy: only once a scene asks
     for collection in reversed(imported_collections(scene)):
         suns = [obj for obj in collection.all_objects if usable(obj)]
         if suns:
