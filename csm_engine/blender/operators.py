@@ -458,8 +458,8 @@ def sample_scenes():
 
 
 class CSM_MT_import_sample_scene(bpy.types.Menu):
-    """The scenes that ship with CSM, imported at once (with Replace; the Adjust Last \
-Operation panel switches to Add)"""
+    """The scenes that ship with CSM, imported at once in place of the current scene's \
+contents (Ctrl+Z brings them back; the Adjust Last Operation panel switches to Add)"""
     bl_idname = "CSM_MT_import_sample_scene"
     bl_label = "CSM Sample Scene"
 
@@ -467,7 +467,10 @@ Operation panel switches to Add)"""
         layout = self.layout
         layout.operator_context = 'EXEC_DEFAULT'    # no file browser: the path is known
         for label, path in sample_scenes():
-            layout.operator(CSM_OT_import_scene.bl_idname, text=label).filepath = path
+            item = layout.operator(CSM_OT_import_scene.bl_idname, text=label)
+            item.filepath = path
+            # Set, so a file import's remembered "Add to Scene" does not apply here.
+            item.mode = 'REPLACE'
 
 
 def menu_import(self, context):

@@ -187,6 +187,7 @@ def test_file_import_lists_the_scene_file_entry_and_the_sample_scenes_by_name():
     for item in menu.layout.items:
         assert item.idname == "csm.import_scene" and item.context == 'EXEC_DEFAULT'
         assert os.path.isfile(item.filepath) and item.filepath.endswith(".json")
+        assert item.mode == 'REPLACE'
     assert menu.layout.items[1].filepath == POINT_LIGHTS
 
 
