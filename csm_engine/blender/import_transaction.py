@@ -5,8 +5,9 @@ import, one line), the record of which datablocks existed before (``data_snapsho
 ``created_since``) and their removal on failure (``remove_datablocks``), the scene state an
 import may change outside its datablocks (``SceneState``: camera, World, active collection,
 selection; ``OutsideChanges``: scene custom properties and add-on preferences that
-importers write), and replacing an earlier import of the same file (``remove_import``,
-``take_back_names``). ``scene_builder`` runs the transaction; nothing here creates objects.
+importers write), replacing an earlier import of the same file (``remove_import``,
+``take_back_names``) and emptying the scene for "Replace current scene" (``clear_scene``).
+``scene_builder`` runs the transaction; nothing here creates objects.
 """
 
 import contextlib
@@ -184,6 +185,46 @@ def _material_dependencies(material, node_groups, images):
     walk(material.node_tree)
 
 
+def _used_data(objects):
+    """What ``objects`` use that may lose its last user with them: their data, materials,
+    and the materials' node groups and images, each list without repeats."""
+    data = [obj.data for obj in objects if obj.data is not None]
+    materials, node_groups, images = [], [], []
+    for obj in objects:
+        for slot in obj.material_slots:
+            if slot.material is not None and slot.material not in materials:
+                materials.append(slot.material)
+    for block in data:
+        for material in getattr(block, "materials", []):
+            if material is not None and material not in materials:
+                materials.append(material)
+    for material in materials:
+        _material_dependencies(material, node_groups, images)
+    return data, materials, node_groups, images
+
+
+def _remove(blocks, removed_names):
+    for block in blocks:
+        removed_names.setdefault(type(block).__name__, set()).add(block.name)
+    if blocks:
+        bpy.data.batch_remove(blocks)
+
+
+def _remove_unused(groups, removed_names):
+    """Remove the blocks of ``groups`` (in order: users before what they use) that nothing
+    uses any more; blocks still in use (a mesh the user copied elsewhere) stay."""
+    for group in groups:
+        seen = set()
+        unused = []
+        for block in group:
+            if block.as_pointer() in seen:
+                continue
+            seen.add(block.as_pointer())
+            if block.users == 0:
+                unused.append(block)
+        _remove(unused, removed_names)
+
+
 def remove_import(collection):
     """Delete an earlier import: its collection tree, objects and now-unused data.
 
@@ -203,39 +244,67 @@ def remove_import(collection):
         elsewhere.update(obj.as_pointer() for obj in other.objects)
     only_here = [obj for obj in objects if obj.as_pointer() not in elsewhere]
     only_here_pointers = {obj.as_pointer() for obj in only_here}
-    data = [obj.data for obj in only_here if obj.data is not None]
-    materials, node_groups, images = [], [], []
-    for obj in only_here:
-        for slot in obj.material_slots:
-            if slot.material is not None and slot.material not in materials:
-                materials.append(slot.material)
-    for block in data:
-        for material in getattr(block, "materials", []):
-            if material is not None and material not in materials:
-                materials.append(material)
-    for material in materials:
-        _material_dependencies(material, node_groups, images)
+    used = _used_data(only_here)
     for obj in objects:
         if obj.as_pointer() not in only_here_pointers:
             for c in collections:
                 if obj.name in c.objects:
                     c.objects.unlink(obj)
-    for block in only_here + collections:
-        removed_names.setdefault(type(block).__name__, set()).add(block.name)
-    bpy.data.batch_remove(only_here + collections)
-    for group in (data, materials, node_groups, images):
-        seen = set()
-        unused = []
-        for block in group:
-            if block.as_pointer() in seen:
-                continue
-            seen.add(block.as_pointer())
-            if block.users == 0:
-                removed_names.setdefault(type(block).__name__, set()).add(block.name)
-                unused.append(block)
-        if unused:
-            bpy.data.batch_remove(unused)
+    _remove(only_here + collections, removed_names)
+    _remove_unused(used, removed_names)
     return removed_names
+
+
+def clear_scene(scene, keep, old_world=None):
+    """Empty ``scene`` for "Replace current scene", keeping only the collection ``keep``.
+
+    What File > New leaves out of a scene goes: every object and collection of the scene
+    (the startup Cube, Light and Camera, earlier imports, the user's own objects, in
+    excluded and hidden collections too), then the data and materials nothing uses any
+    more, and ``old_world`` once nothing uses it. Objects and collections another scene
+    also shows are only unlinked from this one, so the other scene keeps them. Settings,
+    render options and other scenes stay. Returns the removed datablocks' names by type
+    and the pointers of the removed collections.
+    """
+    keep_collections = {c.as_pointer() for c in walk_collections(keep)}
+    keep_objects = {obj.as_pointer() for obj in keep.all_objects}
+    shared_collections, shared_objects = set(), set()
+    for other in bpy.data.scenes:
+        if other == scene:
+            continue
+        shared_collections.update(c.as_pointer() for c in walk_collections(other.collection))
+        shared_objects.update(obj.as_pointer() for obj in other.collection.all_objects)
+
+    collections = []
+    seen = set(keep_collections)
+    # A collection another scene shows stays, with everything below it.
+    stack = list(scene.collection.children)
+    while stack:
+        child = stack.pop()
+        pointer = child.as_pointer()
+        if pointer in seen or pointer in shared_collections:
+            continue
+        seen.add(pointer)
+        collections.append(child)
+        stack.extend(child.children)
+    for child in list(scene.collection.children):
+        if child.as_pointer() in shared_collections:
+            scene.collection.children.unlink(child)
+    for obj in list(scene.collection.objects):
+        if obj.as_pointer() in shared_objects:
+            scene.collection.objects.unlink(obj)
+
+    objects = [obj for obj in scene.collection.all_objects
+               if obj.as_pointer() not in keep_objects
+               and obj.as_pointer() not in shared_objects]
+    removed_pointers = {c.as_pointer() for c in collections}
+    removed_names = {}
+    used = _used_data(objects)
+    _remove(objects + collections, removed_names)
+    _remove_unused(used, removed_names)
+    if old_world is not None and scene.world != old_world:
+        _remove_unused([[old_world]], removed_names)
+    return removed_names, removed_pointers
 
 
 _NUMBERED = re.compile(r"^(.*)\.\d{3,}$")

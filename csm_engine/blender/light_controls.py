@@ -1,9 +1,12 @@
 """Sun direction controls and first-person camera settings (``Scene.csm_light``).
 
-Owns the user's view of the sun: azimuth/elevation in degrees and a direction vector, all
-read from and written to the rotation of the scene's first Sun object, so the viewport and
-the Sun gizmo update together through the depsgraph; and "Reset to scene file", which puts
-back the direction the import stored in the collection property ``csm_sun_direction``.
+Owns the user's view of the sun: which Sun object is the scene's active sun
+(``sun_object``: the one the user picked, else the newest CSM import's, never one in an
+excluded or hidden collection); azimuth/elevation in degrees and a direction vector, all
+read from and written to that Sun's rotation, so the viewport and the Sun gizmo update
+together through the depsgraph; "Reset to scene file", which puts back the direction the
+import stored in the collection property ``csm_sun_direction``; and the first-person
+camera's speed (metres per second) and turn rate (an angle per second).
 
 Conventions (Z-up, Blender world):
 - azimuth: degrees from +X toward +Y of the direction TOWARDS the sun (seen from above);
@@ -11,6 +14,7 @@ Conventions (Z-up, Blender world):
 - vector: the direction the light TRAVELS (the Sun's local -Z axis), as in the scene file.
 """
 
+import math
 
 import bpy
 import numpy as np
@@ -18,16 +22,48 @@ from bpy.props import FloatProperty, FloatVectorProperty
 from mathutils import Matrix, Vector
 
 from ..core.controls import azimuth_elevation_from_travel, travel_from_azimuth_elevation
+from .scene_builder import imported_collections
 
 # Fallback direction when the scene has no sun: light coming straight down.
 _NO_SUN_TRAVEL = (0.0, 0.0, -1.0)
 
 
 # ------------------------------------------------------------------ the scene's sun
-def sun_object(scene):
-    """The scene's first Sun light object (by name, so the choice is stable), or None."""
-    suns = [obj for obj in scene.objects
-            if obj.type == 'LIGHT' and obj.data is not None and obj.data.type == 'SUN']
+def _is_sun(obj):
+    return obj.type == 'LIGHT' and obj.data is not None and obj.data.type == 'SUN'
+
+
+def _view_layer_of(scene):
+    context_scene = getattr(bpy.context, "scene", None)
+    view_layer = getattr(bpy.context, "view_layer", None)
+    if context_scene == scene and view_layer is not None:
+        return view_layer
+    return scene.view_layers[0] if len(scene.view_layers) else None
+
+
+def sun_object(scene, view_layer=None):
+    """The scene's active sun, the one the Light panel edits, or None.
+
+    In order: the view layer's active object when it is a Sun (the user picked it); else
+    the Sun of the most recent CSM import into this scene; else the first Sun by name (a
+    stable choice). Only Suns the view layer shows count: never one in an excluded or
+    hidden collection, nor a hidden Sun.
+    """
+    view_layer = view_layer if view_layer is not None else _view_layer_of(scene)
+    if view_layer is None:
+        return None
+
+    def usable(obj):
+        return _is_sun(obj) and obj.visible_get(view_layer=view_layer)
+
+    active = view_layer.objects.active
+    if active is not None and usable(active):
+        return active
+    for collection in reversed(imported_collections(scene)):
+        suns = [obj for obj in collection.all_objects if usable(obj)]
+        if suns:
+            return min(suns, key=lambda obj: obj.name)
+    suns = [obj for obj in view_layer.objects if usable(obj)]
     return min(suns, key=lambda obj: obj.name) if suns else None
 
 
@@ -105,19 +141,20 @@ def _set_elevation(self, value):
 
 
 class CSMLightControls(bpy.types.PropertyGroup):
-    """Sun direction (a view onto the first Sun object) and first-person camera settings."""
+    """Sun direction (a view onto the active Sun object) and first-person camera settings."""
 
     sun_azimuth: FloatProperty(
         name="Sun Azimuth",
         description="Compass direction towards the sun, in degrees from +X toward +Y "
-                    "(0 = sun in +X, 90 = sun in +Y). Rotates the scene's first Sun",
+                    "(0 = sun in +X, 90 = sun in +Y). Rotates the scene's active Sun (the "
+                    "selected one, else the newest imported scene's)",
         get=_get_azimuth, set=_set_azimuth,
         soft_min=-180.0, soft_max=180.0, step=100, precision=1, unit='NONE',
         options=set())
     sun_elevation: FloatProperty(
         name="Sun Elevation",
         description="Height of the sun above the horizon, in degrees (0 = grazing light, "
-                    "90 = straight overhead). Rotates the scene's first Sun",
+                    "90 = straight overhead). Rotates the scene's active Sun",
         get=_get_elevation, set=_set_elevation,
         min=-90.0, max=90.0, step=100, precision=1,
         options=set())
@@ -125,20 +162,22 @@ class CSMLightControls(bpy.types.PropertyGroup):
         name="Light Direction",
         description="Direction the sunlight travels (unit vector, world Z-up, as in the "
                     "scene file's directional_light.direction after Y-up to Z-up). "
-                    "Rotates the scene's first Sun",
+                    "Rotates the scene's active Sun",
         size=3, subtype='DIRECTION', get=_get_travel, set=_set_travel,
         options=set())
-    fly_speed_factor: FloatProperty(
+    fly_speed: FloatProperty(
         name="Fly Speed",
-        description="First-person camera speed as a multiple of the automatic speed "
-                    "(scene bounding-box diagonal / 10 per second). The mouse wheel "
-                    "changes it while flying",
-        default=1.0, min=0.01, max=100.0, soft_min=0.1, soft_max=10.0)
+        description="First-person camera speed, in metres per second. 0 = automatic: "
+                    "the next flight starts at a tenth of the scene's size per second "
+                    "and writes it here. The mouse wheel changes it while flying",
+        default=0.0, min=0.0, max=1.0e5, soft_max=1000.0, precision=2,
+        unit='VELOCITY')
     fly_turn_speed: FloatProperty(
         name="Turn Speed",
-        description="Arrow-key turn rate of the first-person camera, in degrees per "
-                    "second (a mouse drag turns 0.2 degrees per pixel)",
-        default=90.0, min=1.0, max=720.0)
+        description="How fast the arrow keys turn the first-person camera: the angle "
+                    "turned per second (a mouse drag turns 0.2 degrees per pixel)",
+        default=math.radians(90.0), min=math.radians(1.0), max=math.radians(720.0),
+        subtype='ANGLE', unit='ROTATION')
 
 
 classes = (CSMLightControls,)

@@ -5,8 +5,9 @@ Owns one builder per kind of object, in the file's units and Blender's Z-up fram
 object's transform (``add_mesh_file``) and linked copies of them for further references to
 the same file (``add_linked_copy``); the sun (``add_sun``), point lights
 (``add_point_light``), the file's camera or a default view of the whole scene
-(``add_camera``, ``add_default_camera``) and a sky World for scenes without one
-(``ensure_world``); and the scene's bounds the sun and default camera are placed from.
+(``add_camera``, ``add_default_camera``) and a sky World for scenes without one or being
+replaced (``ensure_world``); and the scene's bounds the sun and default camera are placed
+from.
 Running importers is ``mesh_importers``'s part, the transaction ``scene_builder``'s.
 """
 
@@ -236,8 +237,9 @@ def add_default_camera(collection, bounds, name):
 DEFAULT_SKY_COLOR = (0.12, 0.16, 0.22)
 
 
-def ensure_world(scene):
-    if scene.world is not None:
+def ensure_world(scene, replace=False):
+    """Give ``scene`` the CSM sky; a World it already has stays unless ``replace``."""
+    if scene.world is not None and not replace:
         return      # the user's own World (and ambient) stays as it is
     world = bpy.data.worlds.new("CSM Sky")
     world.color = DEFAULT_SKY_COLOR

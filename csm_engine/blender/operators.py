@@ -1,5 +1,6 @@
 """Operators: import/reload scene files, reload shaders, reset the sun, screenshot, and the
-first-person camera; plus the File > Import menu entry.
+first-person camera; plus the File > Import entries (a scene file, or a sample scene that
+ships with the add-on, by name).
 
 Owns the user-facing commands. Errors are shown as one-line operator reports and the
 operator returns ``{'CANCELLED'}``; a traceback never reaches the user, and a failed
@@ -7,19 +8,23 @@ import or reload leaves the scene untouched (the builder guarantees it).
 
 The first-person movement is plain numpy math (``step``, ``turn``) on a world_from_camera
 4x4 matrix (camera looks down its local -Z, local +Y is up), so it is testable without a
-window; the modal operator only feeds it key states and mouse motion.
+window; the modal operator only feeds it key states and mouse motion. Like Blender's Fly
+mode, Esc or right-click cancels (the camera or view goes back to where it started) and a
+left click or Enter keeps the new view.
 """
 
 import contextlib
+import math
 import os
 import time
 
 import bpy
 import numpy as np
-from bpy.props import FloatProperty, StringProperty
+from bpy.props import EnumProperty, FloatProperty, StringProperty
 from bpy_extras.io_utils import ExportHelper, ImportHelper
 from mathutils import Matrix
 
+from ..core import paths
 from ..core.controls import mouse_turn, step, turn
 from . import light_controls, scene_builder
 from .settings import tag_3d_views_for_redraw
@@ -40,22 +45,50 @@ def keeping_render_engines():
                 scene.render.engine = engine
 
 
+IMPORT_MODES = (
+    ('REPLACE', "Replace Current Scene",
+     "Start the scene afresh, as File > New would, with only the imported scene: every "
+     "object and collection of this scene goes (the startup Cube, Light and Camera, "
+     "earlier imports, your own objects), and the sky replaces the World. Ctrl+Z brings "
+     "them back. Settings, render options and other scenes stay"),
+    ('ADD', "Add to Scene",
+     "Keep what the scene has and add the import as a new collection; an earlier import "
+     "of the same file is replaced"),
+)
+
+
 class CSM_OT_import_scene(bpy.types.Operator, ImportHelper):
-    """Import a CSM/CS562 JSON scene (camera, sun, point lights and meshes)"""
+    """Import a CSM/CS562 JSON scene (camera, sun, point lights and meshes). By default it \
+replaces the current scene's contents, as File > New would (Ctrl+Z brings them back); \
+"Add to Scene" keeps them"""
     bl_idname = "csm.import_scene"
     bl_label = "Import CSM Scene"
     bl_options = {'REGISTER', 'UNDO'}
 
     filename_ext = ".json"
     filter_glob: StringProperty(default="*.json", options={'HIDDEN'})
+    mode: EnumProperty(
+        name="Import",
+        description="What happens to the objects the scene already has",
+        items=IMPORT_MODES, default='REPLACE')
+
+    def draw(self, context):
+        # Expanded, one choice a line: a drop-down cuts "Replace Current Scene" in the
+        # file browser's narrow side panel.
+        self.layout.column().prop(self, "mode", expand=True)
 
     def execute(self, context):
+        replace = self.mode == 'REPLACE'
         try:
             with keeping_render_engines():
-                collection = scene_builder.import_scene_file(self.filepath, context.scene)
+                collection = scene_builder.import_scene_file(self.filepath, context.scene,
+                                                             replace=replace)
         except scene_builder.SceneImportError as err:
             self.report({'ERROR'}, str(err))
             return {'CANCELLED'}
+        if replace:
+            # A new scene has a new size: the next flight picks its automatic speed again.
+            context.scene.csm_light.fly_speed = 0.0
         self.report({'INFO'}, f"Imported {collection.name} from {self.filepath}")
         return {'FINISHED'}
 
@@ -193,7 +226,8 @@ class CSM_OT_screenshot(bpy.types.Operator, ExportHelper):
 
 # ------------------------------------------------------------------ first-person camera
 def scene_speed(scene):
-    """Automatic first-person speed, scene units per second: bounds diagonal / 10."""
+    """Automatic first-person speed, metres per second: the diagonal of the visible
+    meshes' bounds / 10, so a flight crosses any scene in about ten seconds."""
     corners = []
     for obj in scene.objects:
         if obj.type == 'MESH' and obj.visible_get():
@@ -210,20 +244,36 @@ def scene_speed(scene):
 _MOVE_KEYS = {'W': "W", 'A': "A", 'S': "S", 'D': "D", 'Q': "Q", 'E': "E"}
 _ARROWS = {'LEFT_ARROW': (1.0, 0.0), 'RIGHT_ARROW': (-1.0, 0.0),
            'UP_ARROW': (0.0, 1.0), 'DOWN_ARROW': (0.0, -1.0)}
+_CONFIRM_KEYS = {'RET', 'NUMPAD_ENTER'}
+_CANCEL_KEYS = {'ESC', 'RIGHTMOUSE'}
+# The object channels a flight may change, put back exactly (no matrix round trip) on cancel.
+_CAMERA_CHANNELS = ("rotation_mode", "location", "rotation_euler", "rotation_quaternion",
+                    "rotation_axis_angle", "scale")
+_VIEW_CHANNELS = ("view_perspective", "view_location", "view_rotation", "view_distance")
+
+
+def _copy(value):
+    return value.copy() if hasattr(value, "copy") else value
+
+
+def round_speed(speed):
+    """A speed rounded to two significant digits, as a user would type it (55.3 -> 55)."""
+    return float(f"{speed:.2g}")
 
 
 class CSM_OT_first_person(bpy.types.Operator):
-    """First-person camera: W/S forward/back, A/D left/right, Q/E down/up, drag or arrow \
-keys to look, mouse wheel for speed, Esc or right-click to leave. Moves the scene camera \
-when looking through it, else the viewport"""
+    """First-person camera, like Blender's Fly mode: W/S forward/back, A/D left/right, \
+Q/E down/up, drag or arrow keys to look, mouse wheel for speed; left click or Enter keeps \
+the new view, Esc or right-click puts the camera back. Moves the scene camera when \
+looking through it, else the viewport"""
     bl_idname = "csm.first_person"
     bl_label = "CSM First-Person Camera"
     bl_options = {'REGISTER', 'UNDO', 'BLOCKING'}
 
     speed: FloatProperty(
         name="Speed",
-        description="Movement speed in scene units (metres) per second; 0 = automatic "
-                    "(scene size / 10 per second times the Fly Speed setting)",
+        description="Movement speed in metres per second; 0 = the scene's Fly Speed "
+                    "(CSM Light panel)",
         default=0.0, min=0.0, soft_max=1000.0, unit='VELOCITY')
 
     @classmethod
@@ -253,26 +303,55 @@ when looking through it, else the viewport"""
         rv3d.view_rotation = rotation
         rv3d.view_location = tuple(eye - back * rv3d.view_distance)
 
+    def _remember_start(self, context):
+        """What cancelling puts back: the scene camera's transform channels and the view."""
+        camera = context.scene.camera
+        self._camera_start = None
+        if camera is not None:
+            self._camera_start = (camera, {name: _copy(getattr(camera, name))
+                                           for name in _CAMERA_CHANNELS})
+        self._view_start = {name: _copy(getattr(self._rv3d, name)) for name in _VIEW_CHANNELS}
+
+    def _restore_start(self, context):
+        if self._camera_start is not None:
+            camera, channels = self._camera_start
+            for name in _CAMERA_CHANNELS:   # rotation_mode first: it converts the others
+                setattr(camera, name, channels[name])
+        for name in _VIEW_CHANNELS:
+            setattr(self._rv3d, name, self._view_start[name])
+
     def _header(self, context):
-        speed = self._speed(context)
         context.area.header_text_set(
-            f"CSM first person: W/S A/D Q/E move, drag/arrows look, wheel speed "
-            f"({speed:.3g} m/s), Esc/right-click exit")
+            f"CSM first person: W/S A/D Q/E move, drag or arrows look, "
+            f"wheel speed {self._speed(context):.3g} m/s, click/Enter confirm, "
+            f"Esc/right-click cancel")
 
     def _speed(self, context):
+        """Metres per second: the operator's own speed, else the scene's Fly Speed."""
         if self.speed > 0.0:
             return self.speed
-        return self._auto_speed * context.scene.csm_light.fly_speed_factor
+        return context.scene.csm_light.fly_speed
+
+    def _change_speed(self, context, factor):
+        if self.speed > 0.0:
+            self.speed *= factor
+            return
+        light = context.scene.csm_light
+        light.fly_speed = min(max(light.fly_speed * factor, 1e-3), 1e5)
 
     # -- modal ------------------------------------------------------------------------
     def invoke(self, context, event):
         self._rv3d = context.region_data
+        self._remember_start(context)
         if self._rv3d.view_perspective == 'ORTHO':
             self._rv3d.view_perspective = 'PERSP'   # first person needs a perspective eye
-        self._auto_speed = scene_speed(context.scene)
+        light = context.scene.csm_light
+        if self.speed <= 0.0 and light.fly_speed <= 0.0:
+            light.fly_speed = round_speed(scene_speed(context.scene))
         self._held = set()
         self._arrows = set()
-        self._drag_from = None
+        self._drag_from = None      # where the left button went down (then the last point)
+        self._dragged = False       # it moved past the drag threshold: a look, not a click
         self._last_time = time.perf_counter()
         self._timer = context.window_manager.event_timer_add(1.0 / 60.0, window=context.window)
         context.window_manager.modal_handler_add(self)
@@ -284,68 +363,119 @@ when looking through it, else the viewport"""
         context.area.header_text_set(None)
         context.area.tag_redraw()
 
-    def modal(self, context, event):
-        if event.type == 'ESC' or (event.type == 'RIGHTMOUSE' and event.value == 'PRESS'):
-            self._finish(context)
-            return {'FINISHED'}
-        if event.type in _MOVE_KEYS:
-            if event.value == 'PRESS':
-                self._held.add(_MOVE_KEYS[event.type])
-            elif event.value == 'RELEASE':
-                self._held.discard(_MOVE_KEYS[event.type])
-            return {'RUNNING_MODAL'}
-        if event.type in _ARROWS:
-            if event.value == 'PRESS':
-                self._arrows.add(event.type)
-            elif event.value == 'RELEASE':
-                self._arrows.discard(event.type)
-            return {'RUNNING_MODAL'}
-        if event.type in {'WHEELUPMOUSE', 'WHEELDOWNMOUSE'}:
-            light = context.scene.csm_light
-            factor = 1.25 if event.type == 'WHEELUPMOUSE' else 0.8
-            if self.speed > 0.0:
-                self.speed *= factor
-            else:
-                light.fly_speed_factor = min(max(light.fly_speed_factor * factor, 0.01), 100.0)
-            self._header(context)
-            return {'RUNNING_MODAL'}
-        if event.type == 'LEFTMOUSE':
-            # Blender also sends CLICK_DRAG once the mouse moves; only PRESS/RELEASE count.
-            if event.value == 'PRESS':
-                self._drag_from = (event.mouse_x, event.mouse_y)
-            elif event.value == 'RELEASE':
-                self._drag_from = None
-            return {'RUNNING_MODAL'}
-        if event.type == 'MOUSEMOVE' and self._drag_from is not None:
-            dx = event.mouse_x - self._drag_from[0]
-            dy = event.mouse_y - self._drag_from[1]
+    def _confirm(self, context):
+        self._finish(context)
+        return {'FINISHED'}
+
+    def _cancel(self, context):
+        self._restore_start(context)
+        self._finish(context)
+        return {'CANCELLED'}
+
+    def _drag_threshold(self):
+        inputs = getattr(bpy.context.preferences, "inputs", None)
+        return getattr(inputs, "drag_threshold_mouse", 3)
+
+    def _left_button(self, context, event):
+        # A click (press and release without moving) confirms, as in Fly mode; a drag looks.
+        # A quick second press comes as DOUBLE_CLICK; Blender also sends CLICK and
+        # CLICK_DRAG, which the PRESS/RELEASE pair already covers.
+        if event.value in {'PRESS', 'DOUBLE_CLICK'}:
             self._drag_from = (event.mouse_x, event.mouse_y)
-            matrix = turn(self._get_matrix(context), *mouse_turn(dx, dy))
+            self._dragged = False
+        elif event.value == 'RELEASE' and self._drag_from is not None:
+            clicked = not self._dragged
+            self._drag_from = None
+            if clicked:
+                return self._confirm(context)
+        return {'RUNNING_MODAL'}
+
+    def _look(self, context, event):
+        x, y = event.mouse_x, event.mouse_y
+        if not self._dragged:
+            threshold = self._drag_threshold()
+            if max(abs(x - self._drag_from[0]), abs(y - self._drag_from[1])) <= threshold:
+                return {'RUNNING_MODAL'}
+            self._dragged = True
+        dx, dy = x - self._drag_from[0], y - self._drag_from[1]
+        self._drag_from = (x, y)
+        self._set_matrix(context, turn(self._get_matrix(context), *mouse_turn(dx, dy)))
+        context.area.tag_redraw()
+        return {'RUNNING_MODAL'}
+
+    def _fly(self, context):
+        now = time.perf_counter()
+        # A long stall (a slow render) must not throw the camera across the scene, but a
+        # slow software-GL viewport (several frames per second) still moves in real time.
+        dt = min(now - self._last_time, 0.5)
+        self._last_time = now
+        if self._held or self._arrows:
+            matrix = self._get_matrix(context)
+            rate = math.degrees(context.scene.csm_light.fly_turn_speed) * dt
+            yaw = sum(_ARROWS[key][0] for key in self._arrows) * rate
+            pitch = sum(_ARROWS[key][1] for key in self._arrows) * rate
+            if yaw or pitch:
+                matrix = turn(matrix, yaw, pitch)
+            matrix = step(matrix, self._held, dt, self._speed(context))
             self._set_matrix(context, matrix)
             context.area.tag_redraw()
+        return {'RUNNING_MODAL'}
+
+    def modal(self, context, event):
+        kind, value = event.type, event.value
+        if kind in _CANCEL_KEYS and value == 'PRESS':
+            return self._cancel(context)
+        if kind in _CONFIRM_KEYS and value == 'PRESS':
+            return self._confirm(context)
+        if kind in _MOVE_KEYS or kind in _ARROWS:
+            keys, key = ((self._held, _MOVE_KEYS[kind]) if kind in _MOVE_KEYS
+                         else (self._arrows, kind))
+            if value == 'PRESS':
+                keys.add(key)
+            elif value == 'RELEASE':
+                keys.discard(key)
             return {'RUNNING_MODAL'}
-        if event.type == 'TIMER':
-            now = time.perf_counter()
-            # A long stall (a slow render) must not throw the camera across the scene, but a
-            # slow software-GL viewport (several frames per second) still moves in real time.
-            dt = min(now - self._last_time, 0.5)
-            self._last_time = now
-            if self._held or self._arrows:
-                matrix = self._get_matrix(context)
-                rate = context.scene.csm_light.fly_turn_speed * dt
-                yaw = sum(_ARROWS[key][0] for key in self._arrows) * rate
-                pitch = sum(_ARROWS[key][1] for key in self._arrows) * rate
-                if yaw or pitch:
-                    matrix = turn(matrix, yaw, pitch)
-                matrix = step(matrix, self._held, dt, self._speed(context))
-                self._set_matrix(context, matrix)
-                context.area.tag_redraw()
+        if kind in {'WHEELUPMOUSE', 'WHEELDOWNMOUSE'}:
+            self._change_speed(context, 1.25 if kind == 'WHEELUPMOUSE' else 0.8)
+            self._header(context)
             return {'RUNNING_MODAL'}
+        if kind == 'LEFTMOUSE':
+            return self._left_button(context, event)
+        if kind == 'MOUSEMOVE' and self._drag_from is not None:
+            return self._look(context, event)
+        if kind == 'TIMER':
+            return self._fly(context)
         return {'PASS_THROUGH'}
+
+
+def sample_scenes():
+    """The scene files that ship with the add-on, as (menu label, path), by label:
+    ``point_lights.json`` is "Point Lights"."""
+    folder = os.path.join(paths.data_dir(), "scenes")
+    scenes = [(os.path.splitext(name)[0].replace("_", " ").title(), os.path.join(folder, name))
+              for name in os.listdir(folder) if name.lower().endswith(".json")]
+    return sorted(scenes)
+
+
+class CSM_MT_import_sample_scene(bpy.types.Menu):
+    """The scenes that ship with CSM, imported at once in place of the current scene's \
+contents (Ctrl+Z brings them back; the Adjust Last Operation panel switches to Add)"""
+    bl_idname = "CSM_MT_import_sample_scene"
+    bl_label = "CSM Sample Scene"
+
+    def draw(self, context):
+        layout = self.layout
+        layout.operator_context = 'EXEC_DEFAULT'    # no file browser: the path is known
+        for label, path in sample_scenes():
+            item = layout.operator(CSM_OT_import_scene.bl_idname, text=label)
+            item.filepath = path
+            # Set, so a file import's remembered "Add to Scene" does not apply here.
+            item.mode = 'REPLACE'
 
 
 def menu_import(self, context):
     self.layout.operator(CSM_OT_import_scene.bl_idname, text="CSM Scene (.json)")
+    self.layout.menu(CSM_MT_import_sample_scene.bl_idname)
 
 
 classes = (
@@ -358,13 +488,16 @@ classes = (
 )
 
 
+menus = (CSM_MT_import_sample_scene,)
+
+
 def register():
-    for cls in classes:
+    for cls in classes + menus:
         bpy.utils.register_class(cls)
     bpy.types.TOPBAR_MT_file_import.append(menu_import)
 
 
 def unregister():
     bpy.types.TOPBAR_MT_file_import.remove(menu_import)
-    for cls in reversed(classes):
+    for cls in reversed(classes + menus):
         bpy.utils.unregister_class(cls)

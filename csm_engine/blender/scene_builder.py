@@ -21,7 +21,9 @@ Each distinct mesh file is imported once; further references to it get linked co
 (objects sharing its mesh data), each under its own transform.
 
 Re-importing a file replaces its previous import, but only once the new import has
-succeeded.
+succeeded. "Replace current scene" (``replace=True``) empties the scene the way File > New
+starts one (``import_transaction.clear_scene``), also only once the new import has
+succeeded, so a failed import leaves the old scene exactly as it was.
 """
 
 import contextlib
@@ -33,7 +35,7 @@ import numpy as np
 from ..core import conventions, scene_format
 from . import mesh_importers, object_builders
 from .import_transaction import (OutsideChanges, SceneImportError, SceneState,
-                                 created_since, data_snapshot, layer_collection_for,
+                                 clear_scene, created_since, data_snapshot, layer_collection_for,
                                  one_line, remove_datablocks, remove_import,
                                  take_back_names, walk_collections)
 
@@ -61,7 +63,7 @@ def _override_for(scene):
     return bpy.context.temp_override(scene=scene, view_layer=view_layer), view_layer
 
 
-def _build(description, planned, scene, view_layer, scene_path, name):
+def _build(description, planned, scene, view_layer, scene_path, name, replace=False):
     """The import's collection with everything in it, linked to ``scene`` and selected;
     raises on the first failure, leaving the rollback to ``import_scene_file``."""
     collection = bpy.data.collections.new(name)
@@ -101,7 +103,7 @@ def _build(description, planned, scene, view_layer, scene_path, name):
     else:
         camera = object_builders.add_default_camera(collection, bounds, "Camera (default view)")
     scene.camera = camera
-    object_builders.ensure_world(scene)
+    object_builders.ensure_world(scene, replace=replace)
 
     in_layer = {obj.as_pointer() for obj in view_layer.objects}
     for obj in collection.all_objects:
@@ -113,10 +115,13 @@ def _build(description, planned, scene, view_layer, scene_path, name):
     return collection
 
 
-def import_scene_file(path, scene=None):
+def import_scene_file(path, scene=None, replace=False):
     """Import the scene file at ``path`` into ``scene`` (default: the context scene).
 
-    Returns the new collection. Raises only ``SceneImportError``; then nothing changed.
+    ``replace``: the import becomes the scene's only content (objects, collections, World;
+    see ``clear_scene``); otherwise it is added, replacing only an earlier import of the
+    same file. Returns the new collection. Raises only ``SceneImportError``; then nothing
+    changed.
     """
     scene = scene if scene is not None else bpy.context.scene
     scene_path = os.path.abspath(os.fspath(path))
@@ -137,7 +142,8 @@ def import_scene_file(path, scene=None):
     snapshot = data_snapshot()
     try:
         with override:
-            collection = _build(description, planned, scene, view_layer, scene_path, name)
+            collection = _build(description, planned, scene, view_layer, scene_path, name,
+                                replace)
     except BaseException as err:
         remove_datablocks(created_since(snapshot))
         state.restore()
@@ -153,13 +159,16 @@ def import_scene_file(path, scene=None):
     collection["csm_source"] = scene_path
     collection["csm_import_order"] = order
     created = created_since(snapshot)
-    previous_pointers = {c.as_pointer() for c in previous}
-    removed_names = {}
-    for old in previous:
-        for kind, names in remove_import(old).items():
-            removed_names.setdefault(kind, set()).update(names)
+    if replace:
+        removed_names, removed_pointers = clear_scene(scene, collection, state.world)
+    else:
+        removed_pointers = {c.as_pointer() for c in previous}
+        removed_names = {}
+        for old in previous:
+            for kind, names in remove_import(old).items():
+                removed_names.setdefault(kind, set()).update(names)
     take_back_names(created, removed_names)
-    state.restore_active_collection(previous_pointers)
+    state.restore_active_collection(removed_pointers)
     return collection
 
 

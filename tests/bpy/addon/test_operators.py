@@ -4,7 +4,8 @@ Covers: the 3D View shortcuts in the add-on keymap, F5 shader reload with last-g
 fallback (a real GLSL error and its fix), Ctrl+R reload resetting the light and surviving a
 broken file, the sun azimuth/elevation/vector controls and "Reset to scene file", the
 screenshot PNG, the first-person movement math, and the Light/Scene panel contents.
-The first-person modal needs a window; here only its registration and poll are checked.
+Here only the first-person operator's registration and poll are checked; its modal keys
+(cancel, confirm, wheel) are driven with fake events in ``test_first_person.py``.
 """
 
 import json
@@ -68,7 +69,11 @@ def test_light_properties_have_tooltips_with_units():
     props = light_controls.CSMLightControls.bl_rna.properties
     assert "degrees" in props["sun_azimuth"].description
     assert "degrees" in props["sun_elevation"].description
-    assert "per second" in props["fly_speed_factor"].description
+    assert "metres per second" in props["fly_speed"].description
+    assert props["fly_speed"].unit == 'VELOCITY'
+    assert "per second" in props["fly_turn_speed"].description
+    assert props["fly_turn_speed"].subtype == 'ANGLE'
+    assert props["fly_turn_speed"].unit == 'ROTATION'
 
 
 def _addon_items():

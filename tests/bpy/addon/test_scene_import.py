@@ -651,6 +651,7 @@ def test_import_operator_reports_errors_and_cancels(scene, workdir, operators_re
     # The operator itself returns CANCELLED with that one report.
     operator = _Reports()
     operator.filepath = bad
+    operator.mode = 'REPLACE'
     result = operators_registered.CSM_OT_import_scene.execute(operator, bpy.context)
     assert result == {'CANCELLED'}
     assert operator.reports == [({'ERROR'}, str(info.value).strip()[len("Error: "):])]
@@ -658,9 +659,10 @@ def test_import_operator_reports_errors_and_cancels(scene, workdir, operators_re
 
 
 def test_import_and_reload_operators(scene, operators_registered):
-    assert bpy.ops.csm.import_scene(filepath=os.path.join(SCENES, "shadow_test.json")) == \
-        {'FINISHED'}
-    assert bpy.ops.csm.import_scene(filepath=os.path.join(SCENES, "default.json")) == {'FINISHED'}
+    assert bpy.ops.csm.import_scene(filepath=os.path.join(SCENES, "shadow_test.json"),
+                                    mode='ADD') == {'FINISHED'}
+    assert bpy.ops.csm.import_scene(filepath=os.path.join(SCENES, "default.json"),
+                                    mode='ADD') == {'FINISHED'}
     # The active object belongs to shadow_test: that is the import to reload.
     bpy.context.view_layer.objects.active = bpy.data.objects["pillar_10"]
     assert bpy.ops.csm.reload_scene() == {'FINISHED'}

@@ -14,6 +14,7 @@ The same checks through the real window (Blender 3.4, Ctrl+R then Ctrl+Z) are in
 """
 
 import json
+import math
 import os
 
 import bpy
@@ -118,12 +119,12 @@ def test_undo_restores_every_csm_setting_and_redo_reapplies_it(csm_scene):
 
 
 def test_undo_restores_the_first_person_speed_settings(csm_scene):
-    csm_scene.csm_light.fly_speed_factor = 3.0
-    csm_scene.csm_light.fly_turn_speed = 45.0
+    csm_scene.csm_light.fly_speed = 3.0
+    csm_scene.csm_light.fly_turn_speed = math.radians(45.0)
     _push("fly speed")
     scene = _undo()
-    assert scene.csm_light.fly_speed_factor == pytest.approx(1.0)
-    assert scene.csm_light.fly_turn_speed == pytest.approx(90.0)
+    assert scene.csm_light.fly_speed == 0.0                       # automatic
+    assert scene.csm_light.fly_turn_speed == pytest.approx(math.radians(90.0))
 
 
 # ------------------------------------------------------------------------ import
