@@ -238,6 +238,7 @@ def take(depsgraph, camera, is_viewport=False):
     snap.background = world_color
 
     matrices = []
+    suns = []
     instances = snap.instances
     mesh_sources = snap.mesh_sources
     check_shown = None      # whether instances have show_self (asked once, not per object)
@@ -250,7 +251,11 @@ def take(depsgraph, camera, is_viewport=False):
         obj = instance.object
         kind = obj.type
         if kind == 'LIGHT':
-            _add_light(snap, obj, _matrix(instance.matrix_world), light_threshold)
+            if obj.data.type == 'SUN':
+                # The matrix copied: the iterator reuses the instance.
+                suns.append((obj, _matrix(instance.matrix_world)))
+            else:
+                _add_light(snap, obj, _matrix(instance.matrix_world), light_threshold)
         elif kind in _MESH_TYPES:
             original = obj.original
             key = original.name if original else obj.name
@@ -265,6 +270,9 @@ def take(depsgraph, camera, is_viewport=False):
             matrices.append(instance.matrix_world.copy())
             if key not in mesh_sources:
                 mesh_sources[key] = obj
+    if suns:
+        obj, world_from_light = suns[0] if len(suns) == 1 else _active_sun(depsgraph, suns)
+        _add_light(snap, obj, world_from_light, light_threshold)
     # One conversion for every instance (one Matrix at a time costs twice as much).
     for mesh_instance, matrix in zip(snap.instances,
                                      np.array(matrices, dtype=np.float64).reshape(-1, 4, 4)):
@@ -278,6 +286,17 @@ def take(depsgraph, camera, is_viewport=False):
             warnings.append(f"{len(lights)} {kind} lights: CSM draws {limit}, "
                             f"{len(lights) - limit} are left out")
     return snap
+
+
+def _active_sun(depsgraph, suns):
+    """Of several suns, the one that casts CSM's cascades: the scene's active sun, the one
+    the sidebar's Light panel edits (``light_controls.sun_object``), else the first."""
+    from .light_controls import sun_object
+    active = sun_object(depsgraph.scene, depsgraph.view_layer)
+    for obj, world_from_light in suns:
+        if active is not None and obj.original == active:
+            return obj, world_from_light
+    return suns[0]
 
 
 def _add_light(snap, obj, world_from_light, light_threshold=DEFAULT_LIGHT_THRESHOLD):

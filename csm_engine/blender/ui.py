@@ -121,7 +121,7 @@ def draw_scene(layout, context):
     col.operator("csm.reload_shaders", text="Reload Shaders (F5)", icon='SHADERFX')
     col.operator("csm.screenshot", text="Screenshot...", icon='RENDER_STILL')
     col.operator("csm.first_person", text="First Person (Shift F)", icon='VIEW_CAMERA')
-    layout.prop(context.scene.csm_light, "fly_speed_factor")
+    layout.prop(context.scene.csm_light, "fly_speed")
     layout.prop(context.scene.csm_light, "fly_turn_speed")
     error = shader_error()
     if error:

@@ -220,6 +220,25 @@ def test_with_add_the_light_panel_edits_the_newest_imports_sun(startup_scene):
     assert light_controls.sun_object(scene) == sun
 
 
+def test_the_render_lights_with_the_sun_the_light_panel_edits(startup_scene):
+    """CSM draws one sun: of two, the active one, so what the panel turns is what shows."""
+    from csm_engine.blender import snapshot
+    scene_builder.import_scene_file(DEFAULT)
+    scene_builder.import_scene_file(SHADOW_TEST)
+    scene = bpy.context.scene
+
+    def drawn_sun():
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        camera = snapshot.camera_from_scene(scene, depsgraph, 64, 36)
+        return snapshot.take(depsgraph, camera).sun.name
+
+    sun = light_controls.sun_object(scene)
+    assert drawn_sun() == sun.name
+    older = next(obj for obj in _suns(scene) if obj != sun)
+    bpy.context.view_layer.objects.active = older
+    assert drawn_sun() == older.name
+
+
 def test_a_sun_the_view_layer_does_not_show_is_never_the_active_sun(startup_scene):
     scene_builder.import_scene_file(DEFAULT)
     scene_builder.import_scene_file(SHADOW_TEST)
