@@ -1,0 +1,139 @@
+"""The user documentation agrees with the add-on and holds together.
+
+- ``docs/settings.md`` is exactly what ``tools/make_settings_reference.py`` writes from the
+  settings model today (so every default, range, unit and choice on it is the model's),
+  and it names every setting, each with a "when to change it" note.
+- A setting's default stated elsewhere in the docs as "`identifier` (default X)" or
+  "Label (default X)" is the model's default.
+- Every relative link and picture in README.md and docs/ points to a file in the
+  repository; no link leaves it.
+"""
+
+import importlib.util
+import re
+from pathlib import Path
+
+import pytest
+
+from csm_engine.core import settings_model
+from csm_engine.core.settings_model import SETTINGS
+
+ROOT = Path(__file__).resolve().parents[2]
+DOCS = ROOT / "docs"
+PAGES = sorted(DOCS.rglob("*.md")) + [ROOT / "README.md"]
+
+
+def _generator():
+    spec = importlib.util.spec_from_file_location(
+        "make_settings_reference", ROOT / "tools" / "make_settings_reference.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_settings_reference_is_generated_from_the_model():
+    expected = _generator().render()
+    current = (DOCS / "settings.md").read_text(encoding="utf-8")
+    assert current == expected, (
+        "docs/settings.md differs from the settings model: run "
+        "python tools/make_settings_reference.py")
+
+
+def test_settings_reference_names_every_setting():
+    text = (DOCS / "settings.md").read_text(encoding="utf-8")
+    for setting in SETTINGS:
+        assert f"### {setting.name} (`{setting.identifier}`)" in text, setting.identifier
+        for item in setting.items:
+            assert f"`{item.identifier}`" in text, (setting.identifier, item.identifier)
+
+
+def test_every_setting_has_a_note_and_no_note_is_stale():
+    generator = _generator()
+    identifiers = {setting.identifier for setting in SETTINGS}
+    assert set(generator.WHEN) == identifiers
+    assert set(generator.UNITS) <= identifiers
+    assert set(generator.PICTURES) <= identifiers
+    for image, _caption in generator.PICTURES.values():
+        assert (DOCS / "images" / image).is_file(), image
+
+
+def _stated_value(setting, text):
+    """The model's way of writing a default, and the text's, made comparable."""
+    text = text.strip().strip("`*").strip()
+    if setting.kind == settings_model.BOOLEAN:
+        return {"on": True, "true": True, "off": False, "false": False}.get(text.lower(), text)
+    if setting.kind == settings_model.ENUM:
+        for item in setting.items:
+            if text in (item.identifier, item.label):
+                return item.identifier
+        return text
+    if setting.kind == settings_model.FLOAT_VECTOR:
+        try:
+            return tuple(float(v) for v in re.split(r"\s*[/,]\s*", text))
+        except ValueError:
+            return text
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _model_value(setting):
+    if setting.kind in (settings_model.INT, settings_model.FLOAT):
+        return float(setting.default)
+    return setting.default
+
+
+def _stated_defaults():
+    """(page, setting, stated text) for every "X (default V)" in the docs."""
+    found = []
+    for page in PAGES:
+        text = page.read_text(encoding="utf-8")
+        for setting in SETTINGS:
+            names = [re.escape(f"`{setting.identifier}`"), re.escape(f"**{setting.name}**")]
+            # A label alone is only taken where it cannot be the tail of another label
+            # ("Lambda" inside "Lambda (Fitted)").
+            names.append(r"(?<![\w(])" + re.escape(setting.name) + r"(?![\w(])")
+            for name in names:
+                for match in re.finditer(name + r"\s*\(default:?\s*([^,;)]+)[,;)]", text):
+                    found.append((page.relative_to(ROOT).as_posix(), setting, match.group(1)))
+    return found
+
+
+def test_defaults_stated_in_the_docs_are_the_models():
+    wrong = [f"{page}: {setting.identifier} stated as {stated!r}, the model says "
+             f"{setting.default!r}"
+             for page, setting, stated in _stated_defaults()
+             if _stated_value(setting, stated) != _model_value(setting)]
+    assert not wrong, "\n".join(wrong)
+
+
+def test_the_default_check_sees_the_docs():
+    # The check above must have something to compare, or it would pass on any text.
+    assert len(_stated_defaults()) >= 5
+
+
+LINK = re.compile(r"!?\[[^\]]*\]\(([^)\s]+)(?:\s+\"[^\"]*\")?\)")
+
+
+def _links():
+    for page in PAGES:
+        text = page.read_text(encoding="utf-8")
+        # Fenced code is not a link.
+        text = re.sub(r"```.*?```", "", text, flags=re.S)
+        for match in LINK.finditer(text):
+            yield page, match.group(1)
+
+
+@pytest.mark.parametrize("page", PAGES, ids=lambda p: p.relative_to(ROOT).as_posix())
+def test_links_point_to_files_in_the_repository(page):
+    broken = []
+    for source, target in _links():
+        if source != page or re.match(r"[a-z]+:", target) or target.startswith("#"):
+            continue
+        path = (page.parent / target.split("#", 1)[0]).resolve()
+        if ROOT.resolve() not in path.parents and path != ROOT.resolve():
+            broken.append(f"{target} (outside the repository)")
+        elif not path.exists():
+            broken.append(target)
+    assert not broken, f"{page.relative_to(ROOT)}: broken links {broken}"
