@@ -168,9 +168,10 @@ WHEN = {
 
 # A picture says some things better: (file under docs/images, caption).
 PICTURES = {
-    "split_scheme": ("split_schemes.png",
-                     "Cascade colours from a raised camera: uniform, logarithmic, hybrid, "
-                     "manual."),
+    "split_scheme": ("split_schemes_course.png",
+                     "Cascade colours on the shadow test (Fit to Visible Depth off, View "
+                     "Depth): uniform, logarithmic, hybrid (Lambda 0.5), manual "
+                     "(0.05 / 0.2 / 0.6)."),
     "cascade_selection": ("techniques_cascade_fit.png",
                           "Cascade colours. Left: Fit to Visible Depth off, View Depth. "
                           "Middle: fitted, View Depth. Right: fitted, Shadow Map (the "
