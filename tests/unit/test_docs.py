@@ -85,17 +85,24 @@ def _model_value(setting):
 
 
 def _stated_defaults():
-    """(page, setting, stated text) for every "X (default V)" in the docs."""
+    """(page, setting, stated text) for every "X (default V)" or "X (..., default V)" in
+    the docs, X being a setting's identifier in backquotes or its label."""
     found = []
     for page in PAGES:
         text = page.read_text(encoding="utf-8")
         for setting in SETTINGS:
-            names = [re.escape(f"`{setting.identifier}`"), re.escape(f"**{setting.name}**")]
-            # A label alone is only taken where it cannot be the tail of another label
-            # ("Lambda" inside "Lambda (Fitted)").
-            names.append(r"(?<![\w(])" + re.escape(setting.name) + r"(?![\w(])")
-            for name in names:
-                for match in re.finditer(name + r"\s*\(default:?\s*([^,;)]+)[,;)]", text):
+            names = [re.escape(f"`{setting.identifier}`"), re.escape(f"**{setting.name}**"),
+                     r"(?<![\w(*`])" + re.escape(setting.name) + r"(?![\w(*`])"]
+            for bare, name in zip((False, False, True), names):
+                # "Name (default V)", "Name (metres, default V)"
+                pattern = (name + r"\s*\((?:[^()]{0,80}?[,;]\s*)?default:?\s*"
+                           r"([^,;:)]+)[,;:)]")
+                for match in re.finditer(pattern, text):
+                    # A bare label is not taken as the tail of a longer one ("Distance"
+                    # in "Shadow Distance", "Lambda" in "Lambda (Fitted)").
+                    before = text[max(match.start() - 30, 0):match.start()]
+                    if bare and re.search(r"[A-Z][\w-]*[ ]$", before):
+                        continue
                     found.append((page.relative_to(ROOT).as_posix(), setting, match.group(1)))
     return found
 
