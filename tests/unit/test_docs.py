@@ -144,3 +144,19 @@ def test_links_point_to_files_in_the_repository(page):
         elif not path.exists():
             broken.append(target)
     assert not broken, f"{page.relative_to(ROOT)}: broken links {broken}"
+
+
+def test_readme_starts_with_the_two_commands():
+    # Newcomers and CI read the top of the README: the title, then how to render and test.
+    lines = (ROOT / "README.md").read_text(encoding="utf-8").splitlines()
+    assert lines[0] == "# CSM Engine"
+    block = lines[lines.index("```sh") + 1:lines.index("```", lines.index("```sh") + 1)]
+    assert [line.split()[:2] for line in block] == [["./dev", "render"], ["./dev", "test"]]
+    assert lines.index("```sh") == 2
+
+
+def test_the_guide_is_reachable_from_the_readme():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    for page in ("getting-started", "viewport", "settings", "course-assignment",
+                 "troubleshooting", "techniques"):
+        assert f"(docs/{page}.md)" in readme, page
