@@ -136,14 +136,28 @@ def _links():
 def test_links_point_to_files_in_the_repository(page):
     broken = []
     for source, target in _links():
-        if source != page or re.match(r"[a-z]+:", target) or target.startswith("#"):
+        if source != page or re.match(r"[a-z]+:", target):
             continue
-        path = (page.parent / target.split("#", 1)[0]).resolve()
+        file_part, _, fragment = target.partition("#")
+        path = (page.parent / file_part).resolve() if file_part else page.resolve()
         if ROOT.resolve() not in path.parents and path != ROOT.resolve():
             broken.append(f"{target} (outside the repository)")
         elif not path.exists():
             broken.append(target)
+        elif fragment and path.suffix == ".md" and fragment not in _anchors(path):
+            broken.append(f"{target} (no such heading)")
     assert not broken, f"{page.relative_to(ROOT)}: broken links {broken}"
+
+
+def _anchors(path):
+    """The anchors GitHub gives a page's headings: lower case, punctuation dropped,
+    spaces to hyphens."""
+    text = re.sub(r"```.*?```", "", path.read_text(encoding="utf-8"), flags=re.S)
+    anchors = set()
+    for heading in re.findall(r"^#+\s+(.*)$", text, flags=re.M):
+        slug = re.sub(r"[^\w\- ]", "", heading.strip().lower()).replace(" ", "-")
+        anchors.add(slug)
+    return anchors
 
 
 def test_readme_starts_with_the_two_commands():
