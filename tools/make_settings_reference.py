@@ -10,7 +10,7 @@ has no note, or when a note names a setting that no longer exists.
     python tools/make_settings_reference.py            # rewrite docs/settings.md
     python tools/make_settings_reference.py --check    # exit 1 if it is out of date
 
-Standard library only (the model itself needs nothing else), from any folder.
+No Blender needed (only what the settings model imports); runs from any folder.
 """
 
 import argparse
