@@ -18,6 +18,8 @@ from ..render import shaders
 
 # The top package: "csm_engine", or "bl_ext.user_default.csm_engine" as an extension.
 ADDON_MODULE = __package__.rpartition(".")[0]
+# Characters of a folder path the panel shows (see draw_shader_folder).
+SHOWN_PATH_CHARS = 24
 
 
 def addon_preferences(context=None, create=False):
@@ -93,10 +95,16 @@ def draw_shader_folder(layout, context):
     reload failed: the panel shows that error instead)."""
     library = shaders.LIBRARY
     in_use = library.folder_in_use
-    own = in_use == library.own_folder
-    row = layout.row(align=True)
-    row.label(text="Shaders: add-on's own" if own else f"Shaders: {paths.display_path(in_use)}",
-              icon='FILE_FOLDER')
+    col = layout.column(align=True)
+    if in_use == library.own_folder:
+        row = col.row(align=True)
+        row.label(text="Shaders: add-on's own", icon='FILE_FOLDER')
+    else:
+        # Two lines: the sidebar's default width holds about 24 characters beside the
+        # button.
+        col.label(text="Shaders from:", icon='FILE_FOLDER')
+        row = col.row(align=True)
+        row.label(text=paths.display_path(in_use, max_chars=SHOWN_PATH_CHARS))
     row.operator("csm.open_shader_folder", text="", icon='FILEBROWSER')
     if library.folder != in_use and library.last_error is None:
         layout.label(text="Shader Folder set: F5 loads it", icon='INFO')

@@ -120,8 +120,9 @@ def test_f5_reads_the_shader_folder_and_shows_the_edit(lit_scene, shader_folder,
     assert shaders.LIBRARY.folder_in_use == str(checkout)
     layout = Layout()
     preferences.draw_shader_folder(layout, bpy.context)
-    assert layout.labels == [f"Shaders: {paths.display_path(str(checkout))}"], layout.labels
-    assert layout.labels[0].endswith(os.path.join("my checkout", "shaders"))
+    shown = paths.display_path(str(checkout), max_chars=preferences.SHOWN_PATH_CHARS)
+    assert layout.labels == ["Shaders from:", shown], layout.labels
+    assert shown.endswith(os.path.join("my checkout", "shaders")) and len(shown) <= 24
     copy = render_scene(lit_scene, *SIZE)["combined"]
     np.testing.assert_array_equal(copy, before)            # the same GLSL, the same pixels
 
