@@ -7,7 +7,9 @@ as a user would (the packages come from tools/build.py, as in test_packaging.py)
 preference under that name, points it at a copy of the GLSL library with one edit in
 lighting_frag.glsl (every lit pixel magenta), and F5 (Reload Shaders) must make the next
 render magenta; a folder without the library is refused with one line and the edit keeps
-rendering; clearing the preference brings back the add-on's own shaders and pixels.
+rendering; clearing the preference brings back the add-on's own shaders and pixels. In
+Blender 3.4 the preference is also saved and read back: the next session's first compile
+reads the chosen folder.
 """
 
 import os
@@ -190,3 +192,51 @@ def test_shader_folder_preference_on_every_host(hosts, host_dir, archives, host,
         result
     np.testing.assert_array_equal(hosts.read_png(result["cleared"]),
                                   hosts.read_png(result["own"]))
+
+
+# Runs inside `blender -b --factory-startup`. argv after "--": legacy zip, folder for the
+# student's copy. Installs and enables the add-on, sets the Shader Folder to the edited
+# copy and saves the preferences, as a user does once.
+SAVE_PREFERENCE_SCRIPT = r'''
+import json, os, shutil, sys
+import bpy
+zip_path, out_dir = sys.argv[sys.argv.index("--") + 1:][:2]
+bpy.ops.preferences.addon_install(filepath=zip_path)
+bpy.ops.preferences.addon_enable(module="csm_engine")
+from csm_engine.core import paths
+student = os.path.join(out_dir, "student", "shaders")
+shutil.copytree(paths.shaders_dir(), student)
+lighting = os.path.join(student, "lighting_frag.glsl")
+with open(lighting, encoding="utf-8") as handle:
+    text = handle.read()
+with open(lighting, "w", encoding="utf-8") as handle:
+    handle.write(text.replace(%(lit_line)r, "  out_color = vec4(1.0, 0.0, 1.0, 1.0);"))
+bpy.context.preferences.addons["csm_engine"].preferences.shader_folder = student
+result = {"edit_found": %(lit_line)r in text, "save": sorted(bpy.ops.wm.save_userpref())}
+print("CSM_RESULT " + json.dumps(result), flush=True)
+''' % {"lit_line": LIT_LINE}
+
+
+def test_blender_3_4_keeps_the_preference_and_the_first_compile_reads_it(hosts, host_dir,
+                                                                         archives):
+    """Saved with the preferences, the Shader Folder is what the next session's first
+    compile reads: a command-line render of the startup cube shows the edit."""
+    blender = hosts.blender_binary()
+    script = host_dir / "save_preference.py"
+    script.write_text(SAVE_PREFERENCE_SCRIPT)
+    env = hosts.user_dirs_env(str(host_dir))
+    run = hosts.run_host([blender, "-b", "--factory-startup", "--python-exit-code", "1",
+                          "--python", str(script), "--", archives[1], str(host_dir)],
+                         env, str(host_dir))
+    assert run.returncode == 0 and run.result == {"edit_found": True, "save": ["FINISHED"]}, \
+        run.describe()
+    # The startup file (cube, camera, light) with the saved preferences, rendered by CSM.
+    run = hosts.run_host([blender, "-b", "-E", "CSM", "-o", str(host_dir / "render_####"),
+                          "-F", "PNG", "-f", "1"], env, str(host_dir))
+    png = host_dir / "render_0001.png"
+    assert run.returncode == 0 and png.is_file(), run.describe()
+    assert "Shader Folder" not in run.output, run.describe()     # no fallback to the own
+    rgb = hosts.read_png(str(png))[..., :3]
+    # Magenta through Blender's default view transform (Filmic): red and blue, no green.
+    magenta = (rgb[..., 0] > 0.5) & (rgb[..., 2] > 0.5) & (rgb[..., 1] < 0.05)
+    assert magenta.mean() > 0.1, magenta.mean()
