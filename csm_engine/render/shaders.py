@@ -5,11 +5,10 @@ GLSL library ``shaders/`` (the repository's top-level folder in a checkout, the 
 own copy once installed: ``core/paths.py`` finds it), or in the folder the user chose as
 Shader Folder (the add-on preference; ``ShaderLibrary.folder`` says which, and
 ``folder_problem`` checks that a folder holds the whole library before it is read). A
-program names its two stage files;
-the library's topical files (shadow filters, cascade selection, BRDF, debug views...) are
-pulled in by ``#include "file.glsl"``, resolved here (create-info has no include
-mechanism): each file at most once per stage, and each with its own block of line numbers
-so compiler messages can be mapped back to ``file.glsl:line``.
+program names its two stage files; the library's topical files (shadow filters, cascade
+selection, BRDF, debug views...) are pulled in by ``#include "file.glsl"``, resolved here
+(create-info has no include mechanism): each file at most once per stage, and each with its
+own block of line numbers so compiler messages can be mapped back to ``file.glsl:line``.
 
 The frame uniform block is described once, in ``core/frame_layout.py`` (``FRAME_LAYOUT``),
 which generates both the std140 GLSL structs and the numpy packing, so the two can never
@@ -17,7 +16,9 @@ disagree; the limits and enums the GLSL uses (``MAX_*``, ``DEBUG_*``, ``PCF_*``)
 the same module's ``glsl_defines()`` and are given to every program here.
 
 ``ShaderLibrary.reload()`` compiles everything anew and swaps only if every program
-compiled: on an error the last good shaders keep running and ``last_error`` says why.
+compiled: on an error the last good shaders keep running and ``last_error`` says why. The
+first compile never leaves the engine without shaders: a user's folder that fails gives way
+to the add-on's own.
 """
 
 import os
