@@ -188,8 +188,8 @@ def test_shader_folder_preference_on_every_host(hosts, host_dir, archives, host,
     np.testing.assert_array_equal(hosts.read_png(result["invalid"]),
                                   hosts.read_png(result["student"]))
     # Cleared: the add-on's own shaders and pixels again.
-    assert result["cleared_f5"] == ["FINISHED"] and result["cleared_in_use"] == result["own_folder"], \
-        result
+    assert result["cleared_f5"] == ["FINISHED"], result
+    assert result["cleared_in_use"] == result["own_folder"], result
     np.testing.assert_array_equal(hosts.read_png(result["cleared"]),
                                   hosts.read_png(result["own"]))
 

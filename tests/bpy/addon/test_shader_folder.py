@@ -152,7 +152,8 @@ def test_a_folder_without_the_library_is_one_line_and_the_last_shaders_keep_runn
         shader_folder(folder)
         message = reload_shaders()
         assert message.startswith(f"Error: Shader Folder {folder}: {missing}"), message
-        assert message.strip().endswith(" (keeping the previous shaders)") and "\n" not in message.strip()
+        line = message.strip()
+        assert line.endswith(" (keeping the previous shaders)") and "\n" not in line, line
         assert shaders.LIBRARY.folder_in_use == paths.shaders_dir()
         still = render_scene(lit_scene, *SIZE)["combined"]
         np.testing.assert_array_equal(still, before)
