@@ -16,7 +16,7 @@ bl_info = {
     "category": "Render",
 }
 
-_MODULES = ("settings", "light_controls", "engine", "operators", "keymap", "ui")
+_MODULES = ("preferences", "settings", "light_controls", "engine", "operators", "keymap", "ui")
 
 
 def _modules():

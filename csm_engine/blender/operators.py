@@ -127,9 +127,9 @@ object (or the most recent import)"""
 
 
 class CSM_OT_reload_shaders(bpy.types.Operator):
-    """Recompile all CSM shaders from the shaders/ folder the add-on reads (a checkout's \
-own, or the installed copy). On a GLSL error the last good shaders keep running and the \
-error (file:line) is shown"""
+    """Recompile all CSM shaders from the Shader Folder set in the add-on's preferences, or \
+else the add-on's own shaders/. On a GLSL error, or a folder that lacks files, the last good \
+shaders keep running and the error (file:line, or the missing files) is shown"""
     bl_idname = "csm.reload_shaders"
     bl_label = "Reload CSM Shaders"
     bl_options = {'REGISTER'}
@@ -143,9 +143,31 @@ error (file:line) is shown"""
             # ShaderLibrary.reload already printed it to the console.
             self.report({'ERROR'}, f"{error} (keeping the previous shaders)")
             return {'CANCELLED'}
-        # Where the files came from: the running add-on's own folder (core/paths.py).
-        self.report({'INFO'}, f"CSM shaders reloaded from {library.folder}")
+        # Where the files came from: the Shader Folder preference, or the add-on's own.
+        self.report({'INFO'}, f"CSM shaders reloaded from {library.folder_in_use}")
         return {'FINISHED'}
+
+
+class CSM_OT_open_shader_folder(bpy.types.Operator):
+    """Open the folder the CSM shaders are read from in the system's file browser"""
+    bl_idname = "csm.open_shader_folder"
+    bl_label = "Open Shader Folder"
+    bl_options = {'REGISTER'}
+
+    @classmethod
+    def description(cls, context, properties):
+        from ..render import shaders
+        return f"Open the folder the CSM shaders are read from ({shaders.LIBRARY.folder_in_use}) "\
+               "in the system's file browser"
+
+    def execute(self, context):
+        from ..render import shaders
+        folder = shaders.LIBRARY.folder_in_use
+        if not os.path.isdir(folder):
+            self.report({'ERROR'}, f"Shader folder {folder} does not exist")
+            return {'CANCELLED'}
+        # Blender's own operator knows each system's file browser (xdg-open, open, Explorer).
+        return bpy.ops.wm.path_open(filepath=folder)
 
 
 class CSM_OT_reset_sun_direction(bpy.types.Operator):
@@ -482,6 +504,7 @@ classes = (
     CSM_OT_import_scene,
     CSM_OT_reload_scene,
     CSM_OT_reload_shaders,
+    CSM_OT_open_shader_folder,
     CSM_OT_reset_sun_direction,
     CSM_OT_screenshot,
     CSM_OT_first_person,

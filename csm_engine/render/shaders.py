@@ -2,11 +2,13 @@
 
 Owns every ``gpu.types.GPUShader`` the pipeline uses. GLSL lives as real files in the
 GLSL library ``shaders/`` (the repository's top-level folder in a checkout, the package's
-own copy once installed: ``core/paths.py`` finds it). A program names its two stage files;
-the library's topical files (shadow filters, cascade selection, BRDF, debug views...) are
-pulled in by ``#include "file.glsl"``, resolved here (create-info has no include
-mechanism): each file at most once per stage, and each with its own block of line numbers
-so compiler messages can be mapped back to ``file.glsl:line``.
+own copy once installed: ``core/paths.py`` finds it), or in the folder the user chose as
+Shader Folder (the add-on preference; ``ShaderLibrary.folder`` says which, and
+``folder_problem`` checks that a folder holds the whole library before it is read). A
+program names its two stage files; the library's topical files (shadow filters, cascade
+selection, BRDF, debug views...) are pulled in by ``#include "file.glsl"``, resolved here
+(create-info has no include mechanism): each file at most once per stage, and each with its
+own block of line numbers so compiler messages can be mapped back to ``file.glsl:line``.
 
 The frame uniform block is described once, in ``core/frame_layout.py`` (``FRAME_LAYOUT``),
 which generates both the std140 GLSL structs and the numpy packing, so the two can never
@@ -14,7 +16,9 @@ disagree; the limits and enums the GLSL uses (``MAX_*``, ``DEBUG_*``, ``PCF_*``)
 the same module's ``glsl_defines()`` and are given to every program here.
 
 ``ShaderLibrary.reload()`` compiles everything anew and swaps only if every program
-compiled: on an error the last good shaders keep running and ``last_error`` says why.
+compiled: on an error the last good shaders keep running and ``last_error`` says why. The
+first compile never leaves the engine without shaders: a user's folder that fails gives way
+to the add-on's own.
 """
 
 import os
@@ -253,6 +257,33 @@ def _map_log(log, file_ids):
     return re.sub(r"(?<![\d.])\d{5,6}(?![\d.])", replace, log)
 
 
+def folder_problem(folder):
+    """Why ``folder`` cannot be read as the GLSL library, in a few words, or None: it must
+    hold every program's stage files and every file those include (with or without an
+    ``#ifdef`` around the include: some program takes each branch)."""
+    if not os.path.isdir(folder):
+        return "no such folder"
+    pending = sorted({spec[stage] for spec in PROGRAMS.values()
+                      for stage in ("vertex", "fragment")})
+    seen, missing = set(), []
+    while pending:
+        name = pending.pop()
+        if name in seen:
+            continue
+        seen.add(name)
+        try:
+            with open(os.path.join(folder, name), encoding="utf-8", errors="replace") as handle:
+                pending.extend(_INCLUDE.findall(handle.read()))
+        except OSError:
+            missing.append(name)
+    if not missing:
+        return None
+    # The program file everyone edits first, then the rest in name order.
+    missing.sort(key=lambda name: (name != paths.SHADER_MARKER, name))
+    more = f" and {len(missing) - 3} more files" if len(missing) > 3 else ""
+    return f"missing {', '.join(missing[:3])}{more}"
+
+
 _LOCATION = re.compile(r"[\w.-]+\.glsl:\d+")
 
 
@@ -360,13 +391,20 @@ def release_retired():
 
 
 class ShaderLibrary:
-    """All programs, compiled lazily together; reload keeps the last good set on error."""
+    """All programs, compiled lazily together; reload keeps the last good set on error.
 
-    def __init__(self, directory=None):
+    ``directory`` fixes the folder (tests); otherwise ``preferred_folder()`` (the user's
+    Shader Folder preference, given by the Blender side: an absolute path, or "" for none)
+    names it when set, else the add-on's own library is read."""
+
+    def __init__(self, directory=None, preferred_folder=None):
         self.directory = directory
+        self.preferred_folder = preferred_folder
         self._shaders = None
         self.last_error = None
         self.generation = 0
+        # The folder the running programs were compiled from (None before the first).
+        self.compiled_from = None
 
     def __del__(self):
         # A library that goes away (e.g. a temporary one in tests) frees nothing itself.
@@ -377,13 +415,31 @@ class ShaderLibrary:
             pass
 
     @property
-    def folder(self):
-        """The folder the programs are (re)compiled from: the one given, else the running
+    def own_folder(self):
+        """The folder read when the user chose none: the one given, else the running
         add-on's own GLSL library (a checkout's shaders/, or the installed copy)."""
         return self.directory or paths.shaders_dir()
 
-    def _compile_all(self):
-        directory = self.folder
+    @property
+    def folder(self):
+        """The folder the next compile (F5, or the first frame) reads: the user's Shader
+        Folder when set, else ``own_folder``."""
+        if not self.directory and self.preferred_folder is not None:
+            preferred = self.preferred_folder()
+            if preferred:
+                return preferred
+        return self.own_folder
+
+    @property
+    def folder_in_use(self):
+        """The folder the running programs came from; before the first compile, the one it
+        will read."""
+        return self.compiled_from or self.folder
+
+    def _compile_all(self, directory):
+        problem = folder_problem(directory)
+        if problem:
+            raise ShaderCompileError(f"Shader Folder {directory}: {problem}")
         compiled = {}
         try:
             for name, spec in PROGRAMS.items():
@@ -393,10 +449,30 @@ class ShaderLibrary:
             raise
         return compiled
 
+    def _use(self, shaders, directory):
+        if self._shaders:
+            _RETIRED.append(self._shaders)   # freed by the next draw, not here (see NOTE)
+        self._shaders = shaders
+        self.compiled_from = directory
+        self.generation += 1
+
+    def _compile_first(self):
+        """The first compile. A user's folder that is incomplete or does not compile must
+        not leave the engine without shaders: the add-on's own are compiled instead, and
+        ``last_error`` says why (F5 reads the user's folder again)."""
+        folder, own = self.folder, self.own_folder
+        if folder != own:
+            try:
+                self._use(self._compile_all(folder), folder)
+                return
+            except ShaderCompileError as error:
+                self.last_error = f"{error} (the add-on's own shaders are in use)"
+                print(f"CSM: {self.last_error}", file=sys.stderr)
+        self._use(self._compile_all(own), own)
+
     def get(self, name):
         if self._shaders is None:
-            self._shaders = self._compile_all()
-            self.generation += 1
+            self._compile_first()
         return self._shaders[name]
 
     def release(self):
@@ -405,20 +481,21 @@ class ShaderLibrary:
         if self._shaders:
             _RETIRED.append(self._shaders)
         self._shaders = None
+        self.compiled_from = None
 
     def reload(self):
-        """Recompile every program from disk. Returns None on success, else the message."""
+        """Recompile every program from ``folder``. Returns None on success, else the
+        message (the folder is checked first: an incomplete one is named with what it
+        lacks)."""
+        folder = self.folder
         try:
-            shaders = self._compile_all()
+            shaders = self._compile_all(folder)
         except ShaderCompileError as error:
             self.last_error = str(error)
             print(f"CSM: {self.last_error} (keeping the previous shaders)", file=sys.stderr)
             return self.last_error
-        if self._shaders:
-            _RETIRED.append(self._shaders)   # freed by the next draw, not here (see NOTE)
-        self._shaders = shaders
+        self._use(shaders, folder)
         self.last_error = None
-        self.generation += 1
         return None
 
 

@@ -6,7 +6,8 @@ and after a conditional include (shadow_frag.glsl), and the message of
 ``ShaderLibrary.reload`` (what F5 reports) must name exactly that file and line. Blender 3.4
 and pip bpy 4.2 run the same check in tests/hosts/test_shader_errors_hosts.py. F5 in a
 checkout reads the top-level ``shaders/`` (the installed add-on's copy is checked in
-tests/hosts/test_packaging.py).
+tests/hosts/test_packaging.py), and a Shader Folder chosen in the add-on's preferences is
+reported the same way (tests/bpy/addon/test_shader_folder.py has the rest of that path).
 """
 import os
 import re
@@ -17,6 +18,7 @@ import pytest
 
 from tests.bpy.bpy_helpers import render_scene
 from tests.conftest import REPO
+from csm_engine.blender import preferences
 from csm_engine.core import paths
 from csm_engine.render import shaders
 
@@ -112,3 +114,32 @@ def test_f5_in_a_checkout_reads_the_top_level_shaders_folder(empty_scene, tmp_pa
     generation = library.generation
     assert bpy.ops.csm.reload_shaders() == {'FINISHED'}
     assert library.last_error is None and library.generation == generation + 1
+
+
+def test_f5_names_file_and_line_in_the_shader_folder_preference(empty_scene, tmp_path):
+    """A student's own folder (the Shader Folder preference): F5 names the broken line
+    there, keeps the previous shaders, and picks up the fix."""
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    empty_scene.collection.objects.link(camera)
+    empty_scene.camera = camera
+    render_scene(empty_scene, 16, 16)          # makes sure a GPU context exists
+    folder = tmp_path / "student" / "shaders"
+    shutil.copytree(paths.shaders_dir(), folder)
+    prefs = preferences.addon_preferences(create=True)
+    prefs.shader_folder = str(folder)
+    try:
+        line = break_shader(folder, "shadow_pcf.glsl")
+        generation = shaders.LIBRARY.generation
+        with pytest.raises(RuntimeError) as failure:    # bpy.ops raises on an ERROR report
+            bpy.ops.csm.reload_shaders()
+        assert f"shadow_pcf.glsl:{line}" in str(failure.value), str(failure.value)
+        assert "keeping the previous shaders" in str(failure.value)
+        assert shaders.LIBRARY.generation == generation
+        shutil.copy2(os.path.join(paths.shaders_dir(), "shadow_pcf.glsl"), folder)
+        assert bpy.ops.csm.reload_shaders() == {'FINISHED'}
+        assert shaders.LIBRARY.folder_in_use == str(folder)
+        assert shaders.LIBRARY.last_error is None
+    finally:
+        prefs.shader_folder = ""
+        assert shaders.LIBRARY.reload() is None
+    assert shaders.LIBRARY.folder_in_use == paths.shaders_dir()
