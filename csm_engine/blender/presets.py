@@ -112,9 +112,11 @@ class CSM_OT_preset_add(AddPresetBase, bpy.types.Operator):
         return AddPresetBase.execute(self, context)
 
 
-def draw_menu(layout):
-    """The preset menu as a panel header shows it: the last preset applied, or "Presets"."""
-    layout.menu(CSM_MT_presets.__name__, text=CSM_MT_presets.bl_label, icon='PRESET')
+def draw_menu(layout, named=True):
+    """The preset menu as a panel header shows it: the last preset applied (or "Presets"),
+    or only the presets icon where a name would cover the panel's title."""
+    layout.menu(CSM_MT_presets.__name__, text=CSM_MT_presets.bl_label if named else "",
+                icon='PRESET')
 
 
 classes = (CSM_MT_presets, CSM_OT_preset_add)

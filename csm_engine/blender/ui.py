@@ -113,8 +113,8 @@ def draw_light(layout, context):
     else:
         light = context.scene.csm_light
         col.label(text=f"Sun: {sun.name}", icon='LIGHT_SUN')
-        col.prop(light, "sun_azimuth")
-        col.prop(light, "sun_elevation")
+        col.prop(light, "sun_azimuth", text="Azimuth")
+        col.prop(light, "sun_elevation", text="Elevation")
         col.prop(light, "sun_direction", text="Direction")
         col.operator("csm.reset_sun_direction", icon='FILE_REFRESH')
     col.separator()
@@ -198,7 +198,10 @@ def _make_panel(space, region, context_name, key, label, draw_fn, category=None)
         "draw": draw,
     }
     if key == PRESET_PANEL:
-        attrs["draw_header_preset"] = lambda self, context: presets.draw_menu(self.layout)
+        # The sidebar's header is too narrow for the title and a preset's name.
+        named = space != 'VIEW_3D'
+        attrs["draw_header_preset"] = \
+            lambda self, context: presets.draw_menu(self.layout, named=named)
     if context_name:
         attrs["bl_context"] = context_name
     if category:

@@ -32,6 +32,13 @@ ASSIGNMENT_CONTROLS = ("cascade_count", "resolution", "split_scheme", "split_lam
                        "pcf_pattern", "occluder_margin_auto", "stabilize")
 
 
+@pytest.fixture(autouse=True)
+def fresh_scene_afterwards():
+    """Leave a factory scene behind: later test files read ``bpy.context.scene`` as new."""
+    yield
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+
+
 def shipped_paths():
     return {presets.display_name(path): path for path in presets.shipped_presets()}
 
