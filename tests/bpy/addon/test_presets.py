@@ -19,8 +19,8 @@ EXPECTED = {
     "CS562 assignment": dict(
         cascade_count=3, resolution=2048, equal_resolution=False, split_scheme="HYBRID",
         split_lambda=0.5, fit_to_visible=False, cascade_selection="DEPTH", blend_band=2.0,
-        shadow_filter="PCF", pcf_radius=1, pcf_pattern="GRID", occluder_margin_auto=True,
-        stabilize=True),
+        shadow_filter="PCF", pcf_radius=1, pcf_sharpen=1.0, pcf_pattern="GRID",
+        occluder_margin_auto=True, stabilize=True),
     "Best quality": {},
     "Fast": dict(cascade_count=2, resolution=1024, fit_to_visible=True, pcf_radius=0,
                  ambient_occlusion=False, fxaa=True),
