@@ -1,6 +1,7 @@
 """CSM presets as a user meets them: the menu in the first CSM panel's header, the shipped
 presets applied through Blender's own ``script.execute_preset``, and a preset of one's own
-added and removed with the menu's + and - (``csm.preset_add``)."""
+added and removed with the menu's + and - (``csm.preset_add``); and what the panels show
+after a preset: every setting, greyed out exactly where it does not act."""
 import ast
 import os
 
@@ -214,3 +215,71 @@ def test_inactive_settings_read_the_scenes_values(empty_scene):
     assert not is_active(band, csm)
     for setting in SETTINGS:     # every condition reads a value Blender has
         is_active(setting, csm)
+
+
+class RecordingLayout:
+    """Stands in for a panel's ``UILayout`` (panels cannot draw without a window): records
+    each ``prop`` with whether it shows active (its own and every enclosing layout's
+    ``active``)."""
+
+    def __init__(self, drawn, parent=None):
+        object.__setattr__(self, "drawn", drawn)
+        object.__setattr__(self, "parent", parent)
+        object.__setattr__(self, "active", True)
+        object.__setattr__(self, "use_property_split", True)
+        object.__setattr__(self, "use_property_decorate", True)
+
+    def __setattr__(self, name, value):
+        object.__setattr__(self, name, value)
+
+    def shows_active(self):
+        return self.active and (self.parent is None or self.parent.shows_active())
+
+    def _child(self, *args, **keywords):
+        return RecordingLayout(self.drawn, self)
+
+    column = row = split = box = _child
+
+    def prop(self, data, identifier, index=0, **keywords):
+        if index == 0:     # a vector's fields after the first are the same setting
+            self.drawn.append((identifier, self.shows_active()))
+
+    def operator(self, *args, **keywords):
+        return RecordingLayout([], self)
+
+    def label(self, *args, **keywords):
+        pass
+
+    def separator(self, *args, **keywords):
+        pass
+
+
+def drawn_settings(context):
+    """identifier -> shown active, for every CSM setting the render panels draw."""
+    drawn = []
+    for _key, _label, draw in ui.GROUPS:
+        draw(RecordingLayout(drawn), context)
+    csm_drawn = [(identifier, active) for identifier, active in drawn
+                 if identifier in BY_IDENTIFIER]
+    result = dict(csm_drawn)
+    assert len(result) == len(csm_drawn), "each setting is drawn once"
+    return result
+
+
+@pytest.mark.parametrize("name", [None] + sorted(SHIPPED))
+def test_the_panels_grey_out_exactly_the_settings_that_do_not_act(empty_scene, name):
+    scene = empty_scene
+    if name is not None:
+        bpy.ops.script.execute_preset(filepath=shipped_paths()[name],
+                                      menu_idname="CSM_MT_presets")
+    variants = [{}, dict(shadow_filter="HARD", fade_out=False, ambient_occlusion=False,
+                         occluder_margin_auto=False, debug_view="SHADOW_MAP",
+                         split_scheme="MANUAL", cascade_count=1)]
+    for variant in variants:
+        for identifier, value in variant.items():
+            setattr(scene.csm, identifier, value)
+        drawn = drawn_settings(bpy.context)
+        assert set(drawn) == set(BY_IDENTIFIER), "every setting has a place in the panels"
+        for identifier, active in drawn.items():
+            assert active == is_active(BY_IDENTIFIER[identifier], scene.csm), \
+                (identifier, variant)
