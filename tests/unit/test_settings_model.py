@@ -237,3 +237,40 @@ def test_presets_set_the_method_not_the_views_or_the_scenes_lighting():
     assert {"ambient_strength", "light_falloff"}.isdisjoint(preset)
     assert {"cascade_count", "blend_band", "shadow_filter", "ambient_occlusion",
             "render_samples", "depth_bias", "occluder_margin_auto"} <= preset
+
+
+# A setting the panels grey out must not change what the core plans: (setting, the other
+# settings that make it inactive, a value it is changed to). Blend Band under Shadow Map
+# selection is left out: the cascade fit still leaves room for it, so it changes the maps
+# a little (its tooltip says the width hardly matters there).
+INACTIVE_CHANGES = [
+    ("split_lambda", dict(fit_to_visible=True), 0.0),
+    ("split_lambda", dict(fit_to_visible=False, split_scheme="LOG"), 0.0),
+    ("fitted_split_lambda", dict(fit_to_visible=False), 0.0),
+    ("manual_splits", dict(fit_to_visible=False), (0.2, 0.25, 0.3)),
+    ("split_scheme", dict(fit_to_visible=False, cascade_count=1), "UNIFORM"),
+    ("equal_resolution", dict(fit_to_visible=False, cascade_count=1), True),
+    ("occluder_margin", dict(fit_to_visible=False), 3.0),
+    ("fade_fraction", dict(fit_to_visible=False, fade_out=False), 0.5),
+]
+
+
+@pytest.mark.parametrize("identifier, inactive, value", INACTIVE_CHANGES,
+                         ids=[f"{i}-{'-'.join(map(str, s.values()))}"
+                              for i, s, _ in INACTIVE_CHANGES])
+def test_a_greyed_out_setting_does_not_change_the_plan(identifier, inactive, value):
+    import numpy as np
+    from tests.unit import test_shadow_plan as plans
+    from csm_engine.core import shadow_plan
+
+    base = dict(plans.SETTINGS, **inactive)
+    assert not settings_model.is_active(BY_IDENTIFIER[identifier], default_settings(**base))
+    pairs = np.empty((9, 16, 2))
+    pairs[..., 0], pairs[..., 1] = 20.0, 100.0                   # what the view shows
+    blocks = shadow_plan.depth_blocks_from_reduction(pairs, 16, 320, 180)
+    frames = []
+    for settings in (base, dict(base, **{identifier: value})):
+        snap = plans._snapshot(**settings)
+        plan = shadow_plan.plan_shadows(snap, plans.BOUNDS, blocks)
+        frames.append((plan.splits.tobytes(), shadow_plan.pack_frame(snap, plan).tobytes()))
+    assert frames[0] == frames[1]
