@@ -2,53 +2,81 @@
 and the per-object setting CSM reads in Properties > Object.
 
 Owns layout only. Both places draw the same groups through ``draw_*`` functions, so a
-setting appears identically wherever the user looks for it. Properties > Object >
+setting appears identically wherever the user looks for it; a setting that does not change
+the picture under the others is greyed out (``settings_model.is_active``; its tooltip says
+why). The first panel's header holds the preset menu (presets.py). Properties > Object >
 "Shadow Terminator" shows Blender's own Geometry Offset, which Blender shows only for
-Cycles and EEVEE. "Light" edits the sun
-(``Scene.csm_light``, see light_controls.py) and the ambient term; "Scene" holds the
-import/reload/shader-reload/screenshot/first-person commands and the last shader error.
+Cycles and EEVEE. "Light" edits the sun (``Scene.csm_light``, see light_controls.py) and the
+ambient term; "Scene" holds the import/reload/shader-reload/screenshot/first-person
+commands and the last shader error.
 """
 
 import bpy
+
+from ..core import settings_model
+from ..core.settings_model import BY_IDENTIFIER
+from . import presets
+
+
+def _prop(layout, csm, identifier, **keywords):
+    """One setting, greyed out where it does not change the picture under the other
+    settings (its tooltip ends with the reason: ``settings_model``)."""
+    sub = layout.column()
+    sub.active = settings_model.is_active(BY_IDENTIFIER[identifier], csm)
+    sub.prop(csm, identifier, **keywords)
+
+
+def _manual_splits(layout, csm):
+    """The splits the cascades use (Cascades - 1) in one labelled row: a property-split
+    row would give each field a label column of its own."""
+    setting = BY_IDENTIFIER["manual_splits"]
+    split = layout.split(factor=0.4)
+    split.active = settings_model.is_active(setting, csm)
+    label = split.row()
+    label.alignment = 'RIGHT'
+    label.label(text=setting.name)
+    right = split.row()
+    row = right.row(align=True)
+    row.use_property_split = False
+    for i in range(max(csm.cascade_count - 1, 1)):
+        row.prop(csm, "manual_splits", index=i, text="")
+    if layout.use_property_decorate:
+        right.label(text="", icon='BLANK1')   # the keyframe dots' column
 
 
 def draw_cascades(layout, csm):
     col = layout.column()
     col.prop(csm, "cascade_count")
-    col.prop(csm, "split_scheme")
-    if csm.split_scheme == 'HYBRID':
-        # The weight of the range the splits divide: the visible depth when fitted.
-        col.prop(csm, "fitted_split_lambda" if csm.fit_to_visible else "split_lambda")
-    if csm.split_scheme == 'MANUAL':
-        row = col.row(align=True)
-        for i in range(max(csm.cascade_count - 1, 0)):
-            row.prop(csm, "manual_splits", index=i, text=f"Split {i + 1}")
+    col.prop(csm, "resolution")
+    _prop(col, csm, "equal_resolution")
+    _prop(col, csm, "split_scheme")
+    # Both weights show, so the one Fit to View switches to is there to find.
+    _prop(col, csm, "split_lambda")
+    _prop(col, csm, "fitted_split_lambda")
+    _manual_splits(col, csm)
     col.prop(csm, "fit_to_visible")
     col.prop(csm, "shadow_distance")
-    col.prop(csm, "resolution")
-    col.prop(csm, "equal_resolution")
     col.prop(csm, "stabilize")
-    row = col.row(align=True)
-    row.prop(csm, "fade_out")
-    sub = row.row()
-    sub.active = csm.fade_out
+    row = col.row(align=True, heading=BY_IDENTIFIER["fade_out"].name)
+    row.prop(csm, "fade_out", text="")
+    sub = row.row(align=True)
+    sub.active = settings_model.is_active(BY_IDENTIFIER["fade_fraction"], csm)
     sub.prop(csm, "fade_fraction", text="")
-    col.prop(csm, "cascade_selection")
+    _prop(col, csm, "cascade_selection")
+    _prop(col, csm, "blend_band")
 
 
 def draw_filtering(layout, csm):
     col = layout.column()
     col.prop(csm, "shadow_filter")
-    sub = col.column()
-    sub.active = csm.shadow_filter == 'PCF'
-    sub.prop(csm, "pcf_radius")
-    sub.prop(csm, "pcf_sharpen")
-    sub.prop(csm, "pcf_pattern")
-    col.prop(csm, "blend_band")
+    for identifier in ("pcf_radius", "pcf_sharpen", "pcf_pattern"):
+        _prop(col, csm, identifier)
 
 
 def draw_bias(layout, csm):
     col = layout.column()
+    # Blender has no texel unit to show in the fields.
+    col.label(text="In shadow-map texels")
     col.prop(csm, "depth_bias")
     col.prop(csm, "slope_bias")
     col.prop(csm, "normal_offset")
@@ -58,9 +86,7 @@ def draw_bias(layout, csm):
 def draw_occluders(layout, csm):
     col = layout.column()
     col.prop(csm, "occluder_margin_auto")
-    sub = col.column()
-    sub.active = not csm.occluder_margin_auto
-    sub.prop(csm, "occluder_margin")
+    _prop(col, csm, "occluder_margin")
 
 
 def draw_antialiasing(layout, context):
@@ -73,7 +99,7 @@ def draw_antialiasing(layout, context):
 def draw_debug(layout, csm):
     col = layout.column()
     col.prop(csm, "debug_view")
-    col.prop(csm, "debug_shadow_map")
+    _prop(col, csm, "debug_shadow_map")
     col.prop(csm, "debug_inset")
     col.prop(csm, "freeze_cascades")
 
@@ -87,19 +113,17 @@ def draw_light(layout, context):
     else:
         light = context.scene.csm_light
         col.label(text=f"Sun: {sun.name}", icon='LIGHT_SUN')
-        col.prop(light, "sun_azimuth")
-        col.prop(light, "sun_elevation")
+        col.prop(light, "sun_azimuth", text="Azimuth")
+        col.prop(light, "sun_elevation", text="Elevation")
         col.prop(light, "sun_direction", text="Direction")
         col.operator("csm.reset_sun_direction", icon='FILE_REFRESH')
     col.separator()
-    col.prop(context.scene.csm, "ambient_strength")
     csm = context.scene.csm
+    col.prop(csm, "ambient_strength")
     col.prop(csm, "ambient_occlusion")
-    row = col.row(align=True)
-    row.active = csm.ambient_occlusion
-    row.prop(csm, "ao_distance")
-    row.prop(csm, "ao_strength")
-    col.prop(context.scene.csm, "light_falloff")
+    _prop(col, csm, "ao_distance")
+    _prop(col, csm, "ao_strength")
+    col.prop(csm, "light_falloff")
     col.prop(context.scene.render, "film_transparent")
 
 
@@ -150,10 +174,18 @@ GROUPS = (
 )
 
 
+# The panel whose header holds the preset menu: the first, so the menu is where a preset
+# is looked for, above everything it sets.
+PRESET_PANEL = "cascades"
+
+
 def _make_panel(space, region, context_name, key, label, draw_fn, category=None):
     def draw(self, context):
         # Must return None: Blender 3.4 reports any other return value on every redraw.
         self.layout.use_property_split = True
+        # The sidebar is narrow: the keyframe dots' column would take the labels' room
+        # (keyframes are still set with I or the context menu over a field).
+        self.layout.use_property_decorate = space != 'VIEW_3D'
         draw_fn(self.layout, context)
 
     attrs = {
@@ -165,6 +197,11 @@ def _make_panel(space, region, context_name, key, label, draw_fn, category=None)
         "poll": classmethod(lambda cls, context: context.engine == "CSM"),
         "draw": draw,
     }
+    if key == PRESET_PANEL:
+        # The sidebar's header is too narrow for the title and a preset's name.
+        named = space != 'VIEW_3D'
+        attrs["draw_header_preset"] = \
+            lambda self, context: presets.draw_menu(self.layout, named=named)
     if context_name:
         attrs["bl_context"] = context_name
     if category:
@@ -219,6 +256,7 @@ classes = tuple(
 
 
 def register():
+    presets.register()
     for cls in classes:
         bpy.utils.register_class(cls)
 
@@ -226,3 +264,4 @@ def register():
 def unregister():
     for cls in reversed(classes):
         bpy.utils.unregister_class(cls)
+    presets.unregister()

@@ -1,7 +1,9 @@
 """The settings model is consistent in itself: one entry per setting, defaults inside their
 ranges, enum defaults among their items, enum identifiers exactly core's, and the
 ``Settings`` value object generated from it (the Blender side is checked against it in
-tests/bpy/addon/test_registration.py)."""
+tests/bpy/addon/test_registration.py); when a setting acts (the panels grey it out
+otherwise, the tooltip says why), labels short enough for the sidebar, every number's
+unit, and what presets set."""
 import dataclasses
 import math
 import re
@@ -146,3 +148,144 @@ def test_no_setting_default_is_restated_outside_the_model():
              for text in [path.read_text(encoding="utf-8")]
              for match in restated.finditer(text)]
     assert not found, found
+
+
+# --- when a setting acts, labels, units, presets ------------------------------------------
+
+@pytest.mark.parametrize("setting", [s for s in SETTINGS if s.active_when], ids=_ids)
+def test_conditions_name_other_settings_and_values_they_can_hold(setting):
+    for alternative in setting.active_when:
+        assert alternative and isinstance(alternative, tuple)
+        for condition in alternative:
+            assert isinstance(condition, settings_model.Condition)
+            other = BY_IDENTIFIER[condition.identifier]
+            assert other is not setting
+            assert other.kind in (settings_model.BOOLEAN, settings_model.ENUM,
+                                  settings_model.INT), condition
+            for value in condition.values:
+                if other.kind == settings_model.ENUM:
+                    assert value in other.identifiers, condition
+                elif other.kind == settings_model.BOOLEAN:
+                    assert isinstance(value, bool), condition
+                else:
+                    low, high = other.hard_range
+                    assert low <= value <= high, condition
+
+
+def test_the_tooltip_of_a_setting_that_can_be_inactive_ends_with_the_reason():
+    for setting in SETTINGS:
+        has_reason = "Inactive unless " in setting.description
+        assert has_reason == bool(setting.active_when), setting.identifier
+    assert BY_IDENTIFIER["blend_band"].description.endswith(
+        "Inactive unless Selection is View Depth and Cascades is 2 or more")
+    assert BY_IDENTIFIER["pcf_radius"].description.endswith("Inactive unless Filter is PCF")
+    assert BY_IDENTIFIER["debug_shadow_map"].description.endswith(
+        "Inactive unless View is Shadow map, or Inset is on")
+
+
+def test_is_active_follows_the_settings_a_control_depends_on():
+    def active(identifier, **values):
+        return settings_model.is_active(BY_IDENTIFIER[identifier], default_settings(**values))
+
+    assert not active("blend_band")                        # default: map selection
+    assert active("blend_band", cascade_selection="DEPTH")
+    assert not active("blend_band", cascade_selection="DEPTH", cascade_count=1)
+    assert active("fitted_split_lambda") and not active("split_lambda")
+    assert active("split_lambda", fit_to_visible=False)
+    assert not active("split_lambda", fit_to_visible=False, split_scheme="MANUAL")
+    assert active("manual_splits", split_scheme="MANUAL")
+    assert not active("manual_splits")
+    for identifier in ("pcf_radius", "pcf_sharpen", "pcf_pattern"):
+        assert active(identifier) and not active(identifier, shadow_filter="HARD")
+        assert not active(identifier, shadow_filter="SOFT")
+    assert not active("fade_fraction", fade_out=False)
+    assert not active("occluder_margin") and active("occluder_margin",
+                                                    occluder_margin_auto=False)
+    assert not active("ao_distance", ambient_occlusion=False)
+    assert not active("debug_shadow_map")
+    assert active("debug_shadow_map", debug_view="SHADOW_MAP")
+    assert active("debug_shadow_map", debug_inset=True)
+    assert active("cascade_count") and active("fit_to_visible")
+
+
+# Labels Blender 3.4 showed whole in the 3D View sidebar at its default width (the
+# narrowest place: about 11 characters beside a field, checked in a screenshot).
+LABEL_CHARACTERS = 11
+# Drawn without a label of their own, beside the control they belong to.
+UNLABELLED = {"fade_fraction"}
+
+
+@pytest.mark.parametrize("setting", SETTINGS, ids=_ids)
+def test_labels_are_short_enough_for_the_sidebar(setting):
+    if setting.identifier not in UNLABELLED:
+        assert len(setting.name) <= LABEL_CHARACTERS, setting.name
+
+
+def test_labels_are_unique_within_a_panel():
+    for group in settings_model.GROUPS:
+        names = [s.name for s in SETTINGS if s.group == group]
+        assert len(names) == len(set(names)), group
+
+
+# How a tooltip names a number's unit when Blender has none to show (texels) or the number
+# has none (a count, a weight, an index).
+UNIT_WORDS = ("texels", "scene units", "0 to 1", "(1 to 4)", "(1 to 64)", "multiplier",
+              "0 = nearest", "fractions")
+
+
+@pytest.mark.parametrize("setting", [s for s in SETTINGS if s.is_number], ids=_ids)
+def test_every_number_shows_or_says_its_unit(setting):
+    if setting.unit is None and setting.subtype is None:
+        assert any(word in setting.description.lower() for word in UNIT_WORDS), \
+            setting.description
+    if setting.unit == "LENGTH":
+        assert "scene units" in setting.description
+
+
+def test_presets_set_the_method_not_the_views_or_the_scenes_lighting():
+    preset = set(settings_model.PRESET_IDENTIFIERS)
+    assert list(settings_model.PRESET_IDENTIFIERS) == \
+        [s.identifier for s in SETTINGS if s.identifier in preset]
+    for setting in SETTINGS:
+        if setting.group == settings_model.DEBUG:
+            assert setting.identifier not in preset
+    assert {"ambient_strength", "light_falloff"}.isdisjoint(preset)
+    assert {"cascade_count", "blend_band", "shadow_filter", "ambient_occlusion",
+            "render_samples", "depth_bias", "occluder_margin_auto"} <= preset
+
+
+# A setting the panels grey out must not change what the core plans: (setting, the other
+# settings that make it inactive, a value it is changed to). Blend Band under Shadow Map
+# selection is left out: the cascade fit still leaves room for it, so it changes the maps
+# a little (its tooltip says the width hardly matters there).
+INACTIVE_CHANGES = [
+    ("split_lambda", dict(fit_to_visible=True), 0.0),
+    ("split_lambda", dict(fit_to_visible=False, split_scheme="LOG"), 0.0),
+    ("fitted_split_lambda", dict(fit_to_visible=False), 0.0),
+    ("manual_splits", dict(fit_to_visible=False), (0.2, 0.25, 0.3)),
+    ("split_scheme", dict(fit_to_visible=False, cascade_count=1), "UNIFORM"),
+    ("equal_resolution", dict(fit_to_visible=False, cascade_count=1), True),
+    ("occluder_margin", dict(fit_to_visible=False), 3.0),
+    ("fade_fraction", dict(fit_to_visible=False, fade_out=False), 0.5),
+]
+
+
+@pytest.mark.parametrize("identifier, inactive, value", INACTIVE_CHANGES,
+                         ids=[f"{i}-{'-'.join(map(str, s.values()))}"
+                              for i, s, _ in INACTIVE_CHANGES])
+def test_a_greyed_out_setting_does_not_change_the_plan(identifier, inactive, value):
+    import numpy as np
+    from tests.unit import test_shadow_plan as plans
+    from csm_engine.core import shadow_plan
+
+    base = dict(plans.SETTINGS, **inactive)
+    assert not settings_model.is_active(BY_IDENTIFIER[identifier], default_settings(**base))
+    pairs = np.empty((9, 16, 2))
+    pairs[..., 0], pairs[..., 1] = 20.0, 100.0                   # what the view shows
+    blocks = shadow_plan.depth_blocks_from_reduction(pairs, 16, 320, 180)
+    frames = []
+    for settings in (base, dict(base, **{identifier: value})):
+        snap = plans._snapshot(**settings)
+        plan = shadow_plan.plan_shadows(snap, plans.BOUNDS, blocks)
+        frames.append((plan.splits.tobytes(), shadow_plan.pack_frame(snap, plan).tobytes()))
+    assert frames[0] == frames[1]
