@@ -164,7 +164,7 @@ def test_list_settings_values_units_and_allowed_values(tmp_path):
     lines, heads = _listing(run_without_bpy(["--list-settings"], tmp_path))
     expected = {
         "cascade_count": "cascade_count = 3 [1 to 4]",
-        "fitted_split_lambda": "fitted_split_lambda = 0.9 [0 to 1]",
+        "fitted_split_lambda": "fitted_split_lambda = 0.9 [a fraction, 0 to 1]",
         "manual_splits": "manual_splits = 0.1, 0.3, 0.6 [0 to 1 each]",
         "resolution": "resolution = 2048 px [64 to 8192 px]",
         "blend_band": "blend_band = 2 m [0 m or more]",
@@ -178,7 +178,7 @@ def test_list_settings_values_units_and_allowed_values(tmp_path):
     # The second line: the label the panel shows and what the setting does.
     index = lines.index(heads["split_lambda"])
     assert lines[index + 1] == ("    Lambda: Hybrid split weight over clip start .. shadow "
-                                "distance (Fit to Visible Depth off), 0 to 1: 0 = uniform, "
+                                "distance (Fit to View off), 0 to 1: 0 = uniform, "
                                 "1 = logarithmic.")
 
 

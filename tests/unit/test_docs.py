@@ -107,11 +107,18 @@ def _stated_defaults():
     return found
 
 
+def _agrees(setting, stated):
+    """Whether ``stated`` is the default of ``setting`` or of a setting with the same label
+    (the Cascades and Light panels each have a "Distance")."""
+    return any(_stated_value(other, stated) == _model_value(other) for other in SETTINGS
+               if other is setting or other.name == setting.name)
+
+
 def test_defaults_stated_in_the_docs_are_the_models():
     wrong = [f"{page}: {setting.identifier} stated as {stated!r}, the model says "
              f"{setting.default!r}"
              for page, setting, stated in _stated_defaults()
-             if _stated_value(setting, stated) != _model_value(setting)]
+             if not _agrees(setting, stated)]
     assert not wrong, "\n".join(wrong)
 
 
