@@ -19,7 +19,7 @@ import time
 import bpy
 
 from ..core.view_state import ShadowViewState
-from ..render import gpu_mesh, pipeline, shaders
+from ..render import gpu_mesh, overlays, pipeline, shaders
 from ..render.resources import RenderResources
 from ..render.result import RenderResult
 from . import compat, mesh_cache, snapshot
@@ -271,8 +271,11 @@ class CSMRenderEngine(bpy.types.RenderEngine):
                                                  region.height)
             snap = self.snapshots.frame(depsgraph, camera, self.cache)
             gpu.state.blend_set('ALPHA_PREMULT' if snap.film_transparent else 'NONE')
-            self.pipeline.draw_viewport(snap, self.cache, region.width, region.height,
-                                        fxaa=bool(snap.settings.fxaa))
+            plan = self.pipeline.draw_viewport(snap, self.cache, region.width,
+                                               region.height, fxaa=bool(snap.settings.fxaa))
+            left, bottom = visible_corner(context.area, region)
+            draw_cascade_legend(snap, plan, region.width, region.height, left, bottom,
+                                context.preferences.system.ui_scale)
             self._viewport_error = None
         except Exception as error:
             # The viewport shows the reason instead of a stale or half-drawn frame; the
@@ -383,6 +386,55 @@ def draw_message(width, height, text):
             blf.position(font, 20, y, 0)
             blf.draw(font, line)
             y -= int(size * 1.6)
+
+
+def visible_corner(area, region):
+    """The bottom-left corner, in ``region``'s pixels, of the part of the viewport that
+    Blender's other regions leave uncovered: with Region Overlap the toolbar (and a header,
+    asset shelf or last-operation panel at the bottom) is drawn over the viewport."""
+    left = bottom = 0
+    if area is None:
+        return left, bottom
+    for other in area.regions:
+        if other.type == 'WINDOW' or other.width <= 1 or other.height <= 1:
+            continue
+        right_edge = other.x + other.width - region.x
+        top_edge = other.y + other.height - region.y
+        overlaps = (right_edge > 0 and other.x < region.x + region.width and top_edge > 0
+                    and other.y < region.y + region.height)
+        if not overlaps:
+            continue
+        if other.x <= region.x and other.height > region.height // 2:
+            left = max(left, right_edge)           # a full-height strip on the left
+        elif other.y <= region.y and other.x < region.x + region.width // 2:
+            bottom = max(bottom, top_edge)         # along the bottom, reaching the left half
+    return left, bottom
+
+
+def draw_cascade_legend(snap, plan, width, height, left=0, bottom=0, scale=1.0):
+    """The cascade-colour legend over a viewport frame drawn with ``plan``, in the bound
+    framebuffer: nothing unless Debug View is Cascade colours. (``left``, ``bottom``): the
+    corner Blender's regions leave visible (``visible_corner``); ``scale``: the UI scale.
+    Drawn after FXAA, so the swatches and text stay crisp; final renders get none."""
+    rows = overlays.cascade_legend(snap, plan)
+    if not rows:
+        return
+    import blf
+    import gpu
+    font = 0
+    compat.blf_size(font, max(int(round(11 * scale)), 6))
+    text_width = max(blf.dimensions(font, row.label)[0] for row in rows)
+    corner = overlays.legend_corner(snap, width, height, left, bottom, scale)
+    layout = overlays.legend_layout(rows, text_width, *corner, scale=scale)
+    overlays.draw_legend_swatches(layout, width, height)
+    from mathutils import Matrix
+    with gpu.matrix.push_pop(), gpu.matrix.push_pop_projection():
+        gpu.matrix.load_identity()
+        gpu.matrix.load_projection_matrix(Matrix(overlays.pixel_space(width, height).tolist()))
+        blf.color(font, 0.92, 0.92, 0.92, 1.0)
+        for row, (x, y) in zip(rows, layout.labels):
+            blf.position(font, x, y, 0)
+            blf.draw(font, row.label)
 
 
 def apply_depsgraph_updates(cache, updates):
