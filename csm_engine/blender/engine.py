@@ -14,6 +14,7 @@ itself, so the request travels to ``render()`` for the duration of that one call
 import atexit
 import contextlib
 import dataclasses
+import math
 import time
 
 import bpy
@@ -274,6 +275,9 @@ class CSMRenderEngine(bpy.types.RenderEngine):
             plan = self.pipeline.draw_viewport(snap, self.cache, region.width,
                                                region.height, fxaa=bool(snap.settings.fxaa))
             left, bottom = visible_corner(context.area, region)
+            frame_left, frame_bottom = camera_frame_corner(context.scene, region,
+                                                           context.region_data)
+            left, bottom = max(left, frame_left), max(bottom, frame_bottom)
             draw_cascade_legend(snap, plan, region.width, region.height, left, bottom,
                                 context.preferences.system.ui_scale)
             self._viewport_error = None
@@ -409,6 +413,24 @@ def visible_corner(area, region):
         elif other.y <= region.y and other.x < region.x + region.width // 2:
             bottom = max(bottom, top_edge)         # along the bottom, reaching the left half
     return left, bottom
+
+
+def camera_frame_corner(scene, region, region_3d):
+    """Looking through the scene camera, the bottom-left corner of its frame in
+    ``region``'s pixels (Blender dims what lies outside it); else (0, 0). A frame corner
+    beyond the region's middle (zoomed far in or panned away) is ignored."""
+    camera = scene.camera if scene is not None else None
+    if camera is None or region_3d is None or region_3d.view_perspective != 'CAMERA':
+        return 0, 0
+    from bpy_extras.view3d_utils import location_3d_to_region_2d
+    points = [location_3d_to_region_2d(region, region_3d, camera.matrix_world @ corner)
+              for corner in camera.data.view_frame(scene=scene)]
+    if any(point is None for point in points):
+        return 0, 0
+    left = int(math.ceil(min(p.x for p in points)))
+    bottom = int(math.ceil(min(p.y for p in points)))
+    return (left if 0 < left < region.width // 2 else 0,
+            bottom if 0 < bottom < region.height // 2 else 0)
 
 
 def draw_cascade_legend(snap, plan, width, height, left=0, bottom=0, scale=1.0):

@@ -104,6 +104,23 @@ def test_the_legend_stays_clear_of_the_toolbar_and_the_inset():
     assert bottom > 8 + 0.35 * 240
 
 
+def test_looking_through_the_camera_the_legend_sits_inside_its_frame(cascade_scene):
+    """Blender dims the viewport outside the camera frame: the legend goes inside it."""
+    from mathutils import Matrix
+    camera = cascade_scene.camera
+    cascade_scene.render.resolution_x, cascade_scene.render.resolution_y = 800, 600
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    region = SimpleNamespace(width=800, height=600)
+    projection = camera.calc_matrix_camera(depsgraph, x=800, y=600)
+    half = Matrix.Diagonal((0.5, 0.5, 1.0, 1.0))   # the frame fills the middle half
+    view = SimpleNamespace(view_perspective='CAMERA',
+                           perspective_matrix=half @ projection @ camera.matrix_world.inverted())
+    left, bottom = engine.camera_frame_corner(cascade_scene, region, view)
+    assert abs(left - 200) <= 1 and abs(bottom - 150) <= 1, (left, bottom)
+    view.view_perspective = 'PERSP'
+    assert engine.camera_frame_corner(cascade_scene, region, view) == (0, 0)
+
+
 def test_the_cascade_view_shows_a_swatch_per_cascade_in_its_colour(cascade_scene):
     pixels, snap, plan = _frame(cascade_scene, corner=(45, 0))
     layout = _layout(snap, plan, corner=(45, 0))
