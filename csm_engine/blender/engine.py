@@ -2,9 +2,11 @@
 
 Owns nothing but the glue: ``render()`` (F12, ``blender -b -f``, the CLI) and
 ``view_update()``/``view_draw()`` (the 3D viewport in Rendered mode) gather a snapshot, keep
-the mesh cache in sync, call ``Pipeline`` and hand the pixels to Blender. GPU objects live
-on the engine instance, created lazily in the context that draws them, and are dropped when
-Blender frees the instance.
+the mesh cache in sync, call ``Pipeline`` and hand the pixels to Blender. Over a viewport
+frame in the Cascade colours view, ``draw_cascade_legend`` adds the legend (its text is
+Blender's ``blf``, so it is written here; ``render/overlays.py`` lays it out). GPU objects
+live on the engine instance, created lazily in the context that draws them, and are
+dropped when Blender frees the instance.
 
 ``render_final(scene)`` is the one way code asks for a final render and gets its
 ``RenderResult`` back (images, plan, timings, warnings, error): Blender creates the engine
@@ -274,12 +276,9 @@ class CSMRenderEngine(bpy.types.RenderEngine):
             gpu.state.blend_set('ALPHA_PREMULT' if snap.film_transparent else 'NONE')
             plan = self.pipeline.draw_viewport(snap, self.cache, region.width,
                                                region.height, fxaa=bool(snap.settings.fxaa))
-            left, bottom = visible_corner(context.area, region)
-            frame_left, frame_bottom = camera_frame_corner(context.scene, region,
-                                                           context.region_data)
-            left, bottom = max(left, frame_left), max(bottom, frame_bottom)
-            draw_cascade_legend(snap, plan, region.width, region.height, left, bottom,
-                                context.preferences.system.ui_scale)
+            if overlays.cascade_legend(snap, plan):
+                draw_cascade_legend(snap, plan, region.width, region.height,
+                                    *legend_room(context), context.preferences.system.ui_scale)
             self._viewport_error = None
         except Exception as error:
             # The viewport shows the reason instead of a stale or half-drawn frame; the
@@ -433,10 +432,20 @@ def camera_frame_corner(scene, region, region_3d):
             bottom if 0 < bottom < region.height // 2 else 0)
 
 
+def legend_room(context):
+    """The bottom-left corner, in the viewport region's pixels, that the legend keeps
+    inside: clear of the regions drawn over the viewport and, looking through the camera,
+    inside the camera frame."""
+    region = context.region
+    left, bottom = visible_corner(context.area, region)
+    frame_left, frame_bottom = camera_frame_corner(context.scene, region, context.region_data)
+    return max(left, frame_left), max(bottom, frame_bottom)
+
+
 def draw_cascade_legend(snap, plan, width, height, left=0, bottom=0, scale=1.0):
     """The cascade-colour legend over a viewport frame drawn with ``plan``, in the bound
     framebuffer: nothing unless Debug View is Cascade colours. (``left``, ``bottom``): the
-    corner Blender's regions leave visible (``visible_corner``); ``scale``: the UI scale.
+    corner the legend keeps inside (``legend_room``); ``scale``: the UI scale.
     Drawn after FXAA, so the swatches and text stay crisp; final renders get none."""
     rows = overlays.cascade_legend(snap, plan)
     if not rows:
