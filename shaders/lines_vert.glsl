@@ -1,4 +1,5 @@
-/* Debug lines (frozen cascade boxes). */
+/* Flat-coloured overlays: the frozen cascade boxes (lines) and the cascade legend's
+ * panel and swatches (triangles in pixel space). */
 void main()
 {
   line_color = color;

@@ -2,9 +2,11 @@
 
 Owns nothing but the glue: ``render()`` (F12, ``blender -b -f``, the CLI) and
 ``view_update()``/``view_draw()`` (the 3D viewport in Rendered mode) gather a snapshot, keep
-the mesh cache in sync, call ``Pipeline`` and hand the pixels to Blender. GPU objects live
-on the engine instance, created lazily in the context that draws them, and are dropped when
-Blender frees the instance.
+the mesh cache in sync, call ``Pipeline`` and hand the pixels to Blender. Over a viewport
+frame in the Cascade colours view, ``draw_cascade_legend`` adds the legend (its text is
+Blender's ``blf``, so it is written here; ``render/overlays.py`` lays it out). GPU objects
+live on the engine instance, created lazily in the context that draws them, and are
+dropped when Blender frees the instance.
 
 ``render_final(scene)`` is the one way code asks for a final render and gets its
 ``RenderResult`` back (images, plan, timings, warnings, error): Blender creates the engine
@@ -14,12 +16,13 @@ itself, so the request travels to ``render()`` for the duration of that one call
 import atexit
 import contextlib
 import dataclasses
+import math
 import time
 
 import bpy
 
 from ..core.view_state import ShadowViewState
-from ..render import gpu_mesh, pipeline, shaders
+from ..render import gpu_mesh, overlays, pipeline, shaders
 from ..render.resources import RenderResources
 from ..render.result import RenderResult
 from . import compat, mesh_cache, snapshot
@@ -271,8 +274,11 @@ class CSMRenderEngine(bpy.types.RenderEngine):
                                                  region.height)
             snap = self.snapshots.frame(depsgraph, camera, self.cache)
             gpu.state.blend_set('ALPHA_PREMULT' if snap.film_transparent else 'NONE')
-            self.pipeline.draw_viewport(snap, self.cache, region.width, region.height,
-                                        fxaa=bool(snap.settings.fxaa))
+            plan = self.pipeline.draw_viewport(snap, self.cache, region.width,
+                                               region.height, fxaa=bool(snap.settings.fxaa))
+            if overlays.cascade_legend(snap, plan):
+                draw_cascade_legend(snap, plan, region.width, region.height,
+                                    *legend_room(context), context.preferences.system.ui_scale)
             self._viewport_error = None
         except Exception as error:
             # The viewport shows the reason instead of a stale or half-drawn frame; the
@@ -383,6 +389,83 @@ def draw_message(width, height, text):
             blf.position(font, 20, y, 0)
             blf.draw(font, line)
             y -= int(size * 1.6)
+
+
+def visible_corner(area, region):
+    """The bottom-left corner, in ``region``'s pixels, of the part of the viewport that
+    Blender's other regions leave uncovered: with Region Overlap the toolbar (and a header,
+    asset shelf or last-operation panel at the bottom) is drawn over the viewport."""
+    left = bottom = 0
+    if area is None:
+        return left, bottom
+    for other in area.regions:
+        if other.type == 'WINDOW' or other.width <= 1 or other.height <= 1:
+            continue
+        right_edge = other.x + other.width - region.x
+        top_edge = other.y + other.height - region.y
+        overlaps = (right_edge > 0 and other.x < region.x + region.width and top_edge > 0
+                    and other.y < region.y + region.height)
+        if not overlaps:
+            continue
+        if other.x <= region.x and other.height > region.height // 2:
+            left = max(left, right_edge)           # a full-height strip on the left
+        elif other.y <= region.y and other.x < region.x + region.width // 2:
+            bottom = max(bottom, top_edge)         # along the bottom, reaching the left half
+    return left, bottom
+
+
+def camera_frame_corner(scene, region, region_3d):
+    """Looking through the scene camera, the bottom-left corner of its frame in
+    ``region``'s pixels (Blender dims what lies outside it); else (0, 0). A frame corner
+    beyond the region's middle (zoomed far in or panned away) is ignored."""
+    camera = scene.camera if scene is not None else None
+    if camera is None or region_3d is None or region_3d.view_perspective != 'CAMERA':
+        return 0, 0
+    from bpy_extras.view3d_utils import location_3d_to_region_2d
+    points = [location_3d_to_region_2d(region, region_3d, camera.matrix_world @ corner)
+              for corner in camera.data.view_frame(scene=scene)]
+    if any(point is None for point in points):
+        return 0, 0
+    left = int(math.ceil(min(p.x for p in points)))
+    bottom = int(math.ceil(min(p.y for p in points)))
+    return (left if 0 < left < region.width // 2 else 0,
+            bottom if 0 < bottom < region.height // 2 else 0)
+
+
+def legend_room(context):
+    """The bottom-left corner, in the viewport region's pixels, that the legend keeps
+    inside: clear of the regions drawn over the viewport and, looking through the camera,
+    inside the camera frame."""
+    region = context.region
+    left, bottom = visible_corner(context.area, region)
+    frame_left, frame_bottom = camera_frame_corner(context.scene, region, context.region_data)
+    return max(left, frame_left), max(bottom, frame_bottom)
+
+
+def draw_cascade_legend(snap, plan, width, height, left=0, bottom=0, scale=1.0):
+    """The cascade-colour legend over a viewport frame drawn with ``plan``, in the bound
+    framebuffer: nothing unless Debug View is Cascade colours. (``left``, ``bottom``): the
+    corner the legend keeps inside (``legend_room``); ``scale``: the UI scale.
+    Drawn after FXAA, so the swatches and text stay crisp; final renders get none."""
+    rows = overlays.cascade_legend(snap, plan)
+    if not rows:
+        return
+    import blf
+    import gpu
+    font = 0
+    compat.blf_size(font, max(int(round(11 * scale)), 6))
+    text_width = max(blf.dimensions(font, row.label)[0] for row in rows)
+    corner = overlays.legend_corner(snap, width, height, left, bottom, scale)
+    layout = overlays.legend_layout(rows, text_width, *corner, scale=scale)
+    overlays.draw_legend_swatches(layout, width, height)
+    from mathutils import Matrix
+    with gpu.matrix.push_pop(), gpu.matrix.push_pop_projection():
+        gpu.matrix.load_identity()
+        gpu.matrix.load_projection_matrix(Matrix(overlays.pixel_space(width, height).tolist()))
+        blf.color(font, 0.92, 0.92, 0.92, 1.0)
+        for row, (x, y) in zip(rows, layout.labels):
+            blf.position(font, x, y, 0)
+            blf.draw(font, row.label)
 
 
 def apply_depsgraph_updates(cache, updates):
