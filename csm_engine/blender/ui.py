@@ -15,7 +15,7 @@ import bpy
 
 from ..core import settings_model
 from ..core.settings_model import BY_IDENTIFIER
-from . import presets
+from . import preferences, presets
 
 
 def _prop(layout, csm, identifier, **keywords):
@@ -147,6 +147,7 @@ def draw_scene(layout, context):
     col.operator("csm.first_person", text="First Person (Shift F)", icon='VIEW_CAMERA')
     layout.prop(context.scene.csm_light, "fly_speed")
     layout.prop(context.scene.csm_light, "fly_turn_speed")
+    preferences.draw_shader_folder(layout, context)
     error = shader_error()
     if error:
         box = layout.box()
