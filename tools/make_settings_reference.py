@@ -57,15 +57,15 @@ WHEN = {
         "compare the split schemes of the course, or to push the splits by hand when one "
         "part of the view needs the sharp map.",
     "split_lambda":
-        "Only used with Split Scheme: Hybrid and Fit to Visible Depth off (the panel shows "
-        "it then). Raise it when near shadows are blurry, lower it when distant shadows "
+        "Only used with Splits: Hybrid and Fit to View off (greyed out "
+        "otherwise). Raise it when near shadows are blurry, lower it when distant shadows "
         "are blocky. The course asks for this control.",
     "fitted_split_lambda":
-        "Only used with Split Scheme: Hybrid and Fit to Visible Depth on (the panel then "
-        "shows it instead of Lambda). Rarely needs changing: lower it if the far part of "
+        "Only used with Splits: Hybrid and Fit to View on (Lambda is greyed "
+        "out then). Rarely needs changing: lower it if the far part of "
         "the view looks blocky while the foreground is sharp.",
     "manual_splits":
-        "Only used with Split Scheme: Manual. Type in where each cascade ends, for example "
+        "Only used with Splits: Manual. Type in where each cascade ends, for example "
         "0.05 / 0.2 / 0.6, to see what each split scheme does, or to keep a region of "
         "interest inside the sharp first cascade.",
     "shadow_distance":
@@ -78,7 +78,7 @@ WHEN = {
         "course's reference, or if the splits jump while the view changes.",
     "cascade_selection":
         "Shadow Map gives the sharpest result. Choose View Depth to see the course's "
-        "method: the cascades then show as bands at the splits and Blend Band acts at "
+        "method: the cascades then show as bands at the splits and Blend acts at "
         "each split, which is what the assignment asks you to show.",
     "resolution":
         "Raise it (4096) when shadow edges are blocky everywhere, lower it (1024) on a "
@@ -110,7 +110,7 @@ WHEN = {
         "at large radii, for a faster but more banded edge.",
     "blend_band":
         "Raise it when a seam shows where one cascade hands over to the next; 0 shows the "
-        "hard switch. It acts at the splits with Cascade Selection: View Depth (set that "
+        "hard switch. It acts at the splits with Selection: View Depth (set that "
         "first to see it), at each map's edge with Shadow Map.",
     "depth_bias":
         "Raise it when lit surfaces show stripes or dots of shadow (acne); lower it when "
@@ -126,7 +126,7 @@ WHEN = {
         "it off when the scene has single-sided planes or thin walls: they stop casting "
         "shadows (light leaks).",
     "occluder_margin_auto":
-        "Leave it on. Turn it off only to set Occluder Margin by hand, for example to show "
+        "Leave it on. Turn it off only to set Margin by hand, for example to show "
         "the course's occluder margin at work.",
     "occluder_margin":
         "Only used with Auto Margin off. Raise it when shadows of objects outside the view "
@@ -142,7 +142,7 @@ WHEN = {
         "shadows without materials; Texel density to see where the shadow map is too "
         "coarse; the G-buffer views to check a material or a mesh's normals.",
     "debug_shadow_map":
-        "With Debug View: Shadow map, pick the cascade (0 is the nearest) or spot light "
+        "With View: Shadow map, pick the cascade (0 is the nearest) or spot light "
         "whose map you want to see.",
     "debug_inset":
         "Turn it on to see the shadow map in a corner while you keep the lit image.",
@@ -169,23 +169,23 @@ WHEN = {
 # A picture says some things better: (file under docs/images, caption).
 PICTURES = {
     "split_scheme": ("split_schemes_course.png",
-                     "Cascade colours on the shadow test (Fit to Visible Depth off, View "
+                     "Cascade colours on the shadow test (Fit to View off, View "
                      "Depth): uniform, logarithmic, hybrid (Lambda 0.5), manual "
                      "(0.05 / 0.2 / 0.6)."),
     "cascade_selection": ("techniques_cascade_fit.png",
-                          "Cascade colours. Left: Fit to Visible Depth off, View Depth. "
+                          "Cascade colours. Left: Fit to View off, View Depth. "
                           "Middle: fitted, View Depth. Right: fitted, Shadow Map (the "
                           "defaults)."),
     "depth_bias": ("trouble_acne.png",
-                   "Constant and Slope Bias at 0 (left: acne) and at their defaults "
+                   "Constant and Slope at 0 (left: acne) and at their defaults "
                    "(right)."),
     "cull_front_faces": ("trouble_light_leak.png",
-                         "A thin roof with Cull Front Faces on (left: its shadow is gone) "
+                         "A thin roof with Cull Front on (left: its shadow is gone) "
                          "and off (right)."),
     "occluder_margin": ("trouble_offscreen_caster.png",
-                        "A pillar behind the camera: Occluder Margin 0 (left) and Auto "
+                        "A pillar behind the camera: Margin 0 (left) and Auto "
                         "Margin (right)."),
-    "debug_view": ("debug_cascades.png", "Debug View: Cascade colours."),
+    "debug_view": ("debug_cascades.png", "View: Cascade colours."),
 }
 
 UNIT_WORDS = {"LENGTH": "metres (scene units)"}

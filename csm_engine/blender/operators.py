@@ -295,7 +295,7 @@ looking through it, else the viewport"""
     speed: FloatProperty(
         name="Speed",
         description="Movement speed in metres per second; 0 = the scene's Fly Speed "
-                    "(CSM Light panel)",
+                    "(CSM Scene panel)",
         default=0.0, min=0.0, soft_max=1000.0, unit='VELOCITY')
 
     @classmethod
