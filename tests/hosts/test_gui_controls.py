@@ -11,7 +11,8 @@ click.
 ``gui_controls_driver.py`` runs inside Blender, sends real X key and mouse events with
 xdotool, and writes a screenshot and a JSON record per step; this file starts the X server
 and Blender, then checks the records and the screenshots' pixels.
-``CSM_UPDATE_DOCS=1`` copies the screenshots to ``docs/images/gui_step_*.png``.
+``CSM_UPDATE_DOCS=1`` (``./dev gui-screenshots``) copies the screenshots, scaled down, to
+``docs/images/gui_step_*.png``.
 """
 
 import json
@@ -26,6 +27,7 @@ import pytest
 from tests.hosts.test_gui_viewport import (  # the same X server and Blender set-up
     SCREEN_SIZE, _blender_env, _fail, _save_preferences_without_splash,
     load_png, x_display)
+from tests.hosts.test_gui_student_walk import save_for_docs
 from tests.hosts.test_packaging import _manifest, _run_build
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
@@ -82,7 +84,7 @@ def run(x_display, hosts, tmp_path_factory):
             shown = handle.read()
         for name in sorted(os.listdir(out_dir)):
             if f"images/gui_{name}" in shown:
-                shutil.copyfile(out_dir / name, os.path.join(DOCS_IMAGES, "gui_" + name))
+                save_for_docs(out_dir / name, os.path.join(DOCS_IMAGES, "gui_" + name))
     return {"report": report, "steps": steps, "dir": out_dir}
 
 
