@@ -10,9 +10,9 @@ driver checks Blender's state on later ticks, once Blender has handled the event
    typed in its search field, a click on the add-on's checkbox (the test installed the
    legacy zip into the user scripts folder, not enabled); record the engine list and the
    CSM sidebar panels;
-2. ``panel``: A and Delete over the viewport (startup objects gone); Properties > Render
-   tab > Render Engine dropdown > S (CSM); F3 "CSM Scene", Enter (File > Import > CSM
-   Scene), and in the file browser Ctrl+L, the scene file's path, Enter, Enter; Numpad 0,
+2. ``panel``: Properties > Render tab > Render Engine dropdown > S (CSM); F3 "CSM
+   Scene", Enter (File > Import > CSM Scene), and in the file browser Ctrl+L, the scene
+   file's path, Enter, Enter (Replace, the default: the startup objects go); Numpad 0,
    Home and a wheel step out (the camera's frame in view), Z over the viewport and
    a click on the pie's "Rendered", N (the sidebar), and a click on its "CSM" tab;
 3. ``cascades``: the sidebar scrolled down with the wheel, a click on the Debug panel's
@@ -24,8 +24,9 @@ driver checks Blender's state on later ticks, once Blender has handled the event
    viewport: Blender's rotate operator turns it 40 degrees about world Z;
 6. ``ctrl_r``: Ctrl+R over the viewport reloads the scene file (sun back to the file);
    ``ctrl_r_undo``: Ctrl+Z (the turned sun is back), Ctrl+Shift+Z (the file's sun again);
-7. ``first_person``: Shift+F over the viewport, W held, a left-button drag, Esc; the
-   camera matrix is read after each;
+7. ``first_person``: Shift+F over the viewport, W held, a left-button drag, Enter (keeps
+   the new view); then Shift+F, W held, Esc (cancels: the camera goes back); the camera
+   matrix is read after each;
 8. ``undo``: a click on the sidebar's "Stabilize" checkbox, then Ctrl+Z, Ctrl+Shift+Z and
    Ctrl+Z over the viewport.
 
@@ -56,7 +57,7 @@ SCENE_FILE = os.path.join(REPO, "csm_engine", "data", "scenes", "default.json")
 
 TICK_S = 0.05
 WAIT_LIMIT_S = 30.0          # one condition that never comes true fails the run with its name
-TOTAL_LIMIT_S = 100.0
+TOTAL_LIMIT_S = 150.0
 SUN_TURN_DEGREES = 40.0
 HOLD_W_S = 0.5
 DRAG_PX = (120, 40)          # mouse drag while in first person: right and up, screen pixels
@@ -73,13 +74,13 @@ AWAY_FROM_REPORT_PX = 200     # mouse move that closes Blender's report popup
 PIE_REACH_PX = 130           # how far up the mouse moves to the Z pie's top item
 SCROLL_CLICKS = 30           # wheel clicks that scroll the CSM sidebar from end to end
 DEBUG_VIEW_FROM_LEFT_PX = 150  # the Debug panel's "View" dropdown, from the sidebar's
-DEBUG_VIEW_FROM_BOTTOM_PX = 300  # bottom-left corner with the sidebar scrolled to its end
+DEBUG_VIEW_FROM_BOTTOM_PX = 324  # bottom-left corner with the sidebar scrolled to its end
 CSM_TAB_FROM_RIGHT_PX = 12   # the "CSM" sidebar tab, from the region's top-right corner
 CSM_TAB_FROM_TOP_PX = 160
-STABILIZE_FROM_LEFT_PX = 89  # the Cascades panel's "Stabilize" checkbox, from the sidebar's
-STABILIZE_FROM_TOP_PX = 206  # top-left corner (same fixed window, CSM tab open)
-SUN_ROW_FROM_LEFT_PX = 100   # the Outliner's "Sun" row (fifth: Scene Collection,
-SUN_ROW_FROM_TOP_PX = 95     # Collection, default, Camera, Sun), from its top-left corner
+STABILIZE_FROM_LEFT_PX = 97  # the Cascades panel's "Stabilize" checkbox, from the sidebar's
+STABILIZE_FROM_TOP_PX = 253  # top-left corner (same fixed window, CSM tab open)
+SUN_ROW_FROM_LEFT_PX = 100   # the Outliner's "Sun" row (fourth: Scene Collection,
+SUN_ROW_FROM_TOP_PX = 75     # default, Camera, Sun), from its top-left corner
 
 sys.dont_write_bytecode = True
 # No sys.path entry for the checkout: the add-on the user enables is the copy the test
@@ -334,18 +335,13 @@ def scenario():
            addon_file=csm_engine.__file__, addon_enabled=addon_enabled,
            window_size=[window.width, window.height])
 
-    # 2. The user's set-up, all through the window: A and Delete over the viewport remove
-    # the startup cube, camera and lamp; Properties > Render tab > Render Engine dropdown >
-    # CSM; F3 (menu search) "CSM Scene" + Enter runs File > Import > CSM Scene (.json), and
-    # in its file browser Ctrl+L (edit the directory), the scene file's path, Enter (a file
-    # path typed there selects that file), Enter (import).
+    # 2. The user's set-up, all through the window: Properties > Render tab > Render Engine
+    # dropdown > CSM; F3 (menu search) "CSM Scene" + Enter runs File > Import > CSM Scene
+    # (.json), and in its file browser Ctrl+L (edit the directory), the scene file's path,
+    # Enter (a file path typed there selects that file), Enter (import, replacing the
+    # current scene's contents by default: the startup cube, camera and lamp go).
     scene = bpy.context.scene
-    mouse_to_viewport()
-    yield pause(0.2)
-    xdotool("key", "a")
-    yield pause(0.2)
-    xdotool("key", "Delete")
-    yield until("A, Delete removed the startup objects", lambda: len(scene.objects) == 0)
+    startup_objects = sorted(o.name for o in scene.objects)
     properties = next(a for a in window.screen.areas if a.type == 'PROPERTIES')
     tabs = next(r for r in properties.regions if r.type == 'NAVIGATION_BAR')
     yield from click_in(window, tabs, tabs.width // 2, RENDER_TAB_FROM_TOP_PX)
@@ -386,6 +382,9 @@ def scenario():
     from csm_engine.blender import scene_builder
     imported = [{"name": c.name, "source": c.get("csm_source")}
                 for c in scene_builder.imported_collections(scene)]
+    objects_after_import = sorted(o.name for o in scene.objects)
+    imported_objects = sorted(o.name for c in scene_builder.imported_collections(scene)
+                              for o in c.all_objects)
     scene.render.resolution_x, scene.render.resolution_y = 1600, 900
     scene.render.dither_intensity = 0.0
     scene.view_settings.view_transform = 'Standard'
@@ -442,7 +441,8 @@ def scenario():
            engine=scene.render.engine, shading=space.shading.type,
            view_perspective=space.region_3d.view_perspective,
            before_sidebar=before_sidebar, shading_before=shading_before,
-           sidebar_before_n=sidebar_before_n,
+           sidebar_before_n=sidebar_before_n, startup_objects=startup_objects,
+           objects_after_import=objects_after_import, imported_objects=imported_objects,
            sun_travel=sun_travel(),
            file_sun_direction=[float(v) for v in _file_direction()])
 
@@ -607,7 +607,7 @@ def scenario():
     record(6, "ctrl_r_undo", undo_states[0]["screenshot"], undo_states=undo_states,
            sun_edited=edited, file_sun_direction=[float(v) for v in _file_direction()])
 
-    # 7. First person: Shift+F over the viewport, hold W, drag the mouse, Esc.
+    # 7. First person: Shift+F over the viewport, hold W, drag the mouse, Enter.
     start = camera_state()
     mouse_to_viewport()
     yield pause(0.2)
@@ -632,11 +632,28 @@ def scenario():
     yield pause(0.3)
     yield fresh_draws(1)
     after_drag = camera_state()
-    xdotool("key", "Escape")
-    yield until("Esc ended the first-person camera", lambda: not FIRST_PERSON["running"])
+    xdotool("key", "Return")
+    yield until("Enter confirmed the first-person camera", lambda: not FIRST_PERSON["running"])
     yield fresh_draws(2)
-    record(7, "first_person", screenshot(7, "first_person"), camera_before=start,
-           camera_after_w=after_w, camera_after_drag=after_drag, camera_after_esc=camera_state(),
+    after_enter = camera_state()
+    shot = screenshot(7, "first_person")
+    # Again, then Esc: the flight is cancelled and the camera goes back to where Enter left it.
+    yield pause(0.2)
+    xdotool("key", "shift+f")
+    yield until("Shift+F started the first-person camera again", lambda: FIRST_PERSON["running"])
+    yield fresh_draws(1)
+    xdotool("keydown", "w")
+    yield pause(HOLD_W_S)
+    xdotool("keyup", "w")
+    yield pause(0.3)
+    yield fresh_draws(1)
+    before_esc = camera_state()
+    xdotool("key", "Escape")
+    yield until("Esc cancelled the first-person camera", lambda: not FIRST_PERSON["running"])
+    yield fresh_draws(2)
+    record(7, "first_person", shot, camera_before=start,
+           camera_after_w=after_w, camera_after_drag=after_drag, camera_after_enter=after_enter,
+           camera_before_esc=before_esc, camera_after_esc=camera_state(),
            invoked=FIRST_PERSON["invoked"], running=FIRST_PERSON["running"],
            hold_w_s=HOLD_W_S, drag_px=list(DRAG_PX),
            view_perspective=space.region_3d.view_perspective)
