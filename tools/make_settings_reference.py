@@ -138,7 +138,7 @@ WHEN = {
         "Turn it off to see raw, aliased pixels, or when fine texture detail must stay "
         "crisp.",
     "debug_view":
-        "Cascade colours to see the splits and the blend band; Shadow factor to judge "
+        "Cascades to see the splits and the blend band; Shadow factor to judge "
         "shadows without materials; Texel density to see where the shadow map is too "
         "coarse; the G-buffer views to check a material or a mesh's normals.",
     "debug_shadow_map":
@@ -169,11 +169,11 @@ WHEN = {
 # A picture says some things better: (file under docs/images, caption).
 PICTURES = {
     "split_scheme": ("split_schemes_course.png",
-                     "Cascade colours on the shadow test (Fit to View off, View "
+                     "Cascades on the shadow test (Fit to View off, View "
                      "Depth): uniform, logarithmic, hybrid (Lambda 0.5), manual "
                      "(0.05 / 0.2 / 0.6)."),
     "cascade_selection": ("techniques_cascade_fit.png",
-                          "Cascade colours. Left: Fit to View off, View Depth. "
+                          "Cascades. Left: Fit to View off, View Depth. "
                           "Middle: fitted, View Depth. Right: fitted, Shadow Map (the "
                           "defaults)."),
     "depth_bias": ("trouble_acne.png",
@@ -185,7 +185,7 @@ PICTURES = {
     "occluder_margin": ("trouble_offscreen_caster.png",
                         "A pillar behind the camera: Margin 0 (left) and Auto "
                         "Margin (right)."),
-    "debug_view": ("debug_cascades.png", "View: Cascade colours."),
+    "debug_view": ("debug_cascades.png", "View: Cascades."),
 }
 
 UNIT_WORDS = {"LENGTH": "metres (scene units)"}

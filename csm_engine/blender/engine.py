@@ -3,7 +3,7 @@
 Owns nothing but the glue: ``render()`` (F12, ``blender -b -f``, the CLI) and
 ``view_update()``/``view_draw()`` (the 3D viewport in Rendered mode) gather a snapshot, keep
 the mesh cache in sync, call ``Pipeline`` and hand the pixels to Blender. Over a viewport
-frame in the Cascade colours view, ``draw_cascade_legend`` adds the legend (its text is
+frame in the Cascades view, ``draw_cascade_legend`` adds the legend (its text is
 Blender's ``blf``, so it is written here; ``render/overlays.py`` lays it out). GPU objects
 live on the engine instance, created lazily in the context that draws them, and are
 dropped when Blender frees the instance.
@@ -444,7 +444,7 @@ def legend_room(context):
 
 def draw_cascade_legend(snap, plan, width, height, left=0, bottom=0, scale=1.0):
     """The cascade-colour legend over a viewport frame drawn with ``plan``, in the bound
-    framebuffer: nothing unless Debug View is Cascade colours. (``left``, ``bottom``): the
+    framebuffer: nothing unless Debug View is Cascades. (``left``, ``bottom``): the
     corner the legend keeps inside (``legend_room``); ``scale``: the UI scale.
     Drawn after FXAA, so the swatches and text stay crisp; final renders get none."""
     rows = overlays.cascade_legend(snap, plan)

@@ -355,7 +355,7 @@ _SETTINGS = (
         items=_items(
             frame_layout.DEBUG_VIEWS,
             NONE=("Lit", "The normal lit image"),
-            CASCADES=("Cascade colours", "Tint by cascade: red nearest, green, blue, yellow "
+            CASCADES=("Cascades", "Tint by cascade: red nearest, green, blue, yellow "
                                          "farthest"),
             SHADOW_FACTOR=("Shadow factor", "Sun visibility only: white lit, black shadowed"),
             SHADOW_MAP=("Shadow map", "Linearized depth of one shadow map"),

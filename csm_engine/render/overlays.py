@@ -4,7 +4,7 @@ viewport's cascade-colour legend.
 Owns ``draw_frozen_cascades`` (coloured lines, one colour per cascade, while Freeze
 Cascades holds them), ``draw_overlays`` (the same into a given framebuffer, after
 anti-aliasing, so 1-pixel lines stay crisp), and the legend's rows (``cascade_legend``:
-colour and depth range of each cascade, while the Cascade colours view is on), its layout
+colour and depth range of each cascade, while the Cascades view is on), its layout
 in pixels (``legend_layout``) and its panel and swatches (``draw_legend_swatches``). The
 legend's text is Blender's (``blf``), so the engine writes it; final renders get no
 legend, so their Combined pass holds only the scene.
@@ -97,7 +97,7 @@ def metres(value):
 
 def cascade_legend(snap, plan):
     """The legend's rows for a frame drawn with ``plan``: one per cascade in use, nearest
-    first, while Debug View is Cascade colours; none otherwise (also none without a
+    first, while Debug View is Cascades; none otherwise (also none without a
     shadow-casting sun, whose view shows no cascades)."""
     if plan is None or snap.settings.debug_view != "CASCADES":
         return []

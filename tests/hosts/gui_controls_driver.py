@@ -446,9 +446,9 @@ def scenario():
            sun_travel=sun_travel(),
            file_sun_direction=[float(v) for v in _file_direction()])
 
-    # 3. Cascade colours, chosen in the sidebar's Debug panel: scroll the sidebar to its end
+    # 3. Cascades, chosen in the sidebar's Debug panel: scroll the sidebar to its end
     # (the Debug panel is below the fold at this window size), click the "View" dropdown
-    # and press C, the menu's underlined key for "Cascade colours". Back to "Lit" (L) the
+    # and press C, the menu's underlined key for "Cascades". Back to "Lit" (L) the
     # same way, then scroll back to the top for step 8's click on Stabilize.
     ui_region = sidebar(area)
     top_on_screen = screen_top(window, ui_region)

@@ -398,7 +398,7 @@ def walk():
                   "fit_to_visible": csm.fit_to_visible, "blend_band": csm.blend_band,
                   "pcf_sharpen": csm.pcf_sharpen})
 
-    # 5. Cascade colours (Debug > View > C, the sidebar scrolled to its end), so the band
+    # 5. Cascades (Debug > View > C, the sidebar scrolled to its end), so the band
     # shows; then Blend 2 m -> 20 m: a click on the field, the number typed, Enter.
     yield from debug_view(window, ui, "c", 'CASCADES')
     yield fresh_draws(2)

@@ -1,4 +1,4 @@
-"""The cascade-colour legend: while Debug View is Cascade colours the viewport shows one
+"""The cascade-colour legend: while Debug View is Cascades the viewport shows one
 swatch per cascade in the exact colour the lighting shader tints it with, labelled with
 its number and depth range in metres, in the bottom-left corner Blender's regions leave
 visible; the lit view and final renders show none.
