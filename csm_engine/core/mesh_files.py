@@ -8,11 +8,15 @@ would block or never end; sizes are within limits; and the headers agree with th
 matches its size exactly, an OBJ has faces whose vertex indices exist). Blender's C++
 importers abort the whole process on some malformed headers (a PLY count that is not a
 number), and report success with an empty mesh on others; both are refused here with one
-line naming the file and the problem. Plain standard library: no Blender, no numpy.
+line naming the file and the problem. Nothing else is refused: what the importers skip or
+read (header lines of other exporters, comments, UTF-16 OBJ text) goes on to them, since
+the checks are there to stop what Blender cannot survive, not to enforce each format's
+letter. Plain standard library: no Blender, no numpy.
 
 ``check_mesh_file(path)`` is the entry point; it raises ``MeshFileError``.
 """
 
+import codecs
 import json
 import os
 import re
@@ -234,8 +238,8 @@ def check_ply(path, size):
                     raise MeshFileError(path, f"{where}: unknown property type "
                                               f"{_shown(words[1])!r}")
                 element.properties.append((words[2], _PLY_TYPE_BYTES[words[1]], None))
-        else:
-            raise MeshFileError(path, f"{where}: unknown header keyword {_shown(keyword)!r}")
+        # Any other line (a "Created by Blender3D 247" that Blender itself once wrote, a
+        # keyword of some other exporter) is skipped by Blender's importers as by this check.
     if file_format is None:
         raise MeshFileError(path, "no 'format' line in the PLY header")
     by_name = {element.name: element for element in elements}
@@ -359,6 +363,28 @@ def _check_mtl(obj_path, mtl_path):
                 _check_referenced(obj_path, folders, name, what)
 
 
+_UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
+
+
+def _obj_text_chunks(path):
+    """The OBJ's text as UTF-8 chunks. Blender's OBJ importer reads UTF-16 files that start
+    with a byte-order mark (little or big endian) too, so those are decoded first, a chunk
+    at a time; a UTF-8 byte-order mark is dropped."""
+    with open(path, "rb") as stream:
+        start = stream.read(3)
+    chunks = _chunks(path)
+    if start[:2] in _UTF16_BOMS:
+        decoder = codecs.getincrementaldecoder("utf-16")(errors="replace")
+        for chunk in chunks:
+            yield decoder.decode(chunk).encode("utf-8")
+        yield decoder.decode(b"", final=True).encode("utf-8")
+        return
+    for chunk in chunks:
+        if start == codecs.BOM_UTF8:
+            chunk, start = chunk[3:], b""
+        yield chunk
+
+
 def check_obj(path, size):
     folder = os.path.dirname(path)
     vertices = 0
@@ -369,7 +395,7 @@ def check_obj(path, size):
     first_bad = None
     remainder = b""
     line_number = 0
-    for chunk in _chunks(path):
+    for chunk in _obj_text_chunks(path):
         lines = (remainder + chunk).split(b"\n")
         remainder = lines.pop()
         for line in lines:
