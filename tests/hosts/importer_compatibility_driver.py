@@ -1,7 +1,8 @@
 """Imports mesh files one after another with the add-on's own importer calls, in one Blender.
 
-Run by ``test_importer_compatibility.py`` in a pip bpy subprocess. argv: the folder holding
-the ``csm_engine`` package, then the mesh files. Before each file it prints
+Run by ``test_importer_compatibility.py`` in a pip bpy subprocess or in ``blender -b``.
+Arguments (after ``--`` for blender): the folder holding the ``csm_engine`` package, then
+the mesh files. Before each file it prints
 ``CSM_START <index>`` and after it ``CSM_RESULT <json>`` with the faces Blender's importer
 read or its one-line error, so the parent knows which file was being read when the process
 died, and restarts a fresh process at the next one.
@@ -11,7 +12,8 @@ import json
 import os
 import sys
 
-sys.path.insert(0, sys.argv[1])
+ARGS = sys.argv[sys.argv.index("--") + 1:] if "--" in sys.argv else sys.argv[1:]
+sys.path.insert(0, ARGS[0])
 
 import bpy  # noqa: E402
 
@@ -46,7 +48,7 @@ def _import(path):
 
 def main():
     bpy.ops.wm.read_factory_settings(use_empty=True)
-    for index, path in enumerate(sys.argv[2:]):
+    for index, path in enumerate(ARGS[1:]):
         print(f"{START_PREFIX}{index}", flush=True)
         outcome = _import(path)
         _clear()

@@ -105,7 +105,8 @@ def _checks(path):
     return None
 
 
-def test_checks_refuse_only_what_blender_cannot_survive(hosts, tmp_path):
+@pytest.mark.parametrize("host", ["bpy 5.0", "bpy 4.2", "blender 3.4"])
+def test_checks_refuse_only_what_blender_cannot_survive(hosts, tmp_path, host):
     files = _corpus()
     assert files, f"{PACKAGE} is installed but holds no OBJ, PLY, STL, glTF or GLB file"
     started = time.monotonic()
@@ -113,7 +114,7 @@ def test_checks_refuse_only_what_blender_cannot_survive(hosts, tmp_path):
     checks_s = time.monotonic() - started
     work = os.path.join(str(tmp_path), "work")
     hosts.copy_package(work)
-    command = [hosts.bpy50_python(), DRIVER, work]
+    command = hosts.script_command(host, DRIVER, work)
     outcomes, processes = _import_all(files, command, hosts.user_dirs_env(str(tmp_path)),
                                       str(tmp_path))
     total_s = time.monotonic() - started
@@ -135,7 +136,7 @@ def test_checks_refuse_only_what_blender_cannot_survive(hosts, tmp_path):
                     else f"hung for {outcome['hang']} s")
             let_through.append(f"{path}: passed the checks, then Blender's importer {what}")
 
-    print(f"\n{PACKAGE}: {len(files)} files, checks {checks_s:.2f} s, "
+    print(f"\n{host}, {PACKAGE}: {len(files)} files, checks {checks_s:.2f} s, "
           f"{processes} Blender process(es), {total_s:.1f} s in all")
     print(f"{'checks':>10} " + " ".join(f"{kind:>9}" for kind in kinds))
     for refused in (False, True):
