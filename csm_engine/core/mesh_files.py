@@ -180,7 +180,11 @@ def check_ply(path, size):
     lines = text.replace("\r", "").split("\n")
     if lines[0].strip() != "ply":
         raise MeshFileError(path, "not a PLY file (the first line is not 'ply')")
+    # Blender's importers read past what this check used to refuse: extra words after a
+    # header line's fields, a format version that is not a number, property types they do
+    # not know in an ASCII body. Only what decides how much the importer reads is checked.
     file_format = None
+    unsized = None      # why a binary body's size cannot be checked, if it cannot
     elements = []
     for number, line in enumerate(lines[1:], start=2):
         words = line.split()
@@ -191,18 +195,10 @@ def check_ply(path, size):
         if keyword == "end_header":
             break
         if keyword == "format":
-            if len(words) != 3 or words[1] not in _PLY_FORMATS:
-                raise MeshFileError(path, f"{where}: format {_shown(' '.join(words[1:]))!r} is "
-                                          f"not one of {', '.join(_PLY_FORMATS)} followed by "
-                                          f"a version")
-            try:
-                float(words[2])
-            except ValueError:
-                raise MeshFileError(path, f"{where}: format version {_shown(words[2])!r} is "
-                                          f"not a number") from None
-            file_format = words[1]
+            if len(words) >= 2 and words[1] in _PLY_FORMATS:
+                file_format = words[1]
         elif keyword == "element":
-            if len(words) != 3:
+            if len(words) < 3:
                 raise MeshFileError(path, f"{where}: expected 'element <name> <count>', got "
                                           f"{_shown(line)!r}")
             name, count_text = words[1], words[2]
@@ -216,32 +212,37 @@ def check_ply(path, size):
             elements.append(_PlyElement(name, count))
         elif keyword == "property":
             if not elements:
+                # Blender 4.2's importer dies on this (segmentation fault).
                 raise MeshFileError(path, f"{where}: a property before any element")
             element = elements[-1]
             if len(words) >= 2 and words[1] == "list":
-                if len(words) != 5:
+                if len(words) < 5:
                     raise MeshFileError(path, f"{where}: expected 'property list <count type> "
                                               f"<item type> <name>', got {_shown(line)!r}")
                 count_type, item_type, name = words[2], words[3], words[4]
                 if count_type not in _PLY_INTEGER_TYPES:
-                    raise MeshFileError(path, f"{where}: list count type {_shown(count_type)!r} "
-                                              f"is not an integer type")
-                if item_type not in _PLY_TYPE_BYTES:
-                    raise MeshFileError(path, f"{where}: unknown property type "
-                                              f"{_shown(item_type)!r}")
-                element.properties.append((name, None, _PLY_TYPE_BYTES[count_type]))
+                    unsized = unsized or (f"{where}: list count type {_shown(count_type)!r} "
+                                          f"is not an integer type")
+                elif item_type not in _PLY_TYPE_BYTES:
+                    unsized = unsized or f"{where}: unknown property type {_shown(item_type)!r}"
+                element.properties.append((name, None, _PLY_TYPE_BYTES.get(count_type, 0)))
             else:
-                if len(words) != 3:
+                if len(words) < 3:
                     raise MeshFileError(path, f"{where}: expected 'property <type> <name>', "
                                               f"got {_shown(line)!r}")
                 if words[1] not in _PLY_TYPE_BYTES:
-                    raise MeshFileError(path, f"{where}: unknown property type "
-                                              f"{_shown(words[1])!r}")
-                element.properties.append((words[2], _PLY_TYPE_BYTES[words[1]], None))
+                    unsized = unsized or f"{where}: unknown property type {_shown(words[1])!r}"
+                element.properties.append((words[2], _PLY_TYPE_BYTES.get(words[1], 0), None))
         # Any other line (a "Created by Blender3D 247" that Blender itself once wrote, a
         # keyword of some other exporter) is skipped by Blender's importers as by this check.
     if file_format is None:
-        raise MeshFileError(path, "no 'format' line in the PLY header")
+        # Some importers read a PLY without a known format line as ASCII, others refuse
+        # it; its body is checked as ASCII, the most a reader can take from it.
+        file_format = "ascii"
+    if file_format != "ascii" and unsized is not None:
+        # The size of an instance is unknown, so the counts cannot be checked against the
+        # file (and Blender's importers cannot read such a binary body anyway).
+        raise MeshFileError(path, f"binary PLY: {unsized}")
     by_name = {element.name: element for element in elements}
     vertex = by_name.get("vertex")
     names = {name for name, _, _ in vertex.properties} if vertex else set()
@@ -367,14 +368,22 @@ _UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
 
 
 def _obj_text_chunks(path):
-    """The OBJ's text as UTF-8 chunks. Blender's OBJ importer reads UTF-16 files that start
-    with a byte-order mark (little or big endian) too, so those are decoded first, a chunk
-    at a time; a UTF-8 byte-order mark is dropped."""
+    """The OBJ's text as UTF-8 chunks. Blender's OBJ importer reads UTF-16 files too (with
+    a byte-order mark, or without one: text whose first character has a zero byte on one
+    side), so those are decoded first, a chunk at a time; a UTF-8 byte-order mark is
+    dropped."""
     with open(path, "rb") as stream:
         start = stream.read(3)
     chunks = _chunks(path)
+    encoding = None
     if start[:2] in _UTF16_BOMS:
-        decoder = codecs.getincrementaldecoder("utf-16")(errors="replace")
+        encoding = "utf-16"
+    elif len(start) >= 2 and start[0] != 0 and start[1] == 0:
+        encoding = "utf-16-le"
+    elif len(start) >= 2 and start[0] == 0 and start[1] != 0:
+        encoding = "utf-16-be"
+    if encoding is not None:
+        decoder = codecs.getincrementaldecoder(encoding)(errors="replace")
         for chunk in chunks:
             yield decoder.decode(chunk).encode("utf-8")
         yield decoder.decode(b"", final=True).encode("utf-8")

@@ -123,13 +123,41 @@ def test_ply_binary_counts_must_fit_the_file_size(tmp_path):
     _refused(_write(tmp_path / "faces.ply", _ply_binary(face_count=50)), "face 50")
 
 
+@pytest.mark.parametrize("change", [
+    # Each of these imports with its face in Blender's C++ importer (4.2 or 5.0).
+    lambda t: t.replace("format ascii 1.0", "format ascii one"),
+    lambda t: t.replace("format ascii 1.0", "format ascii 1.0 extra"),
+    lambda t: t.replace("format ascii 1.0", "format text 1.0"),
+    lambda t: t.replace("format ascii 1.0\n", ""),
+    lambda t: t.replace("property float y", "property quad y"),
+    lambda t: t.replace("list uchar int", "list float int"),
+    lambda t: t.replace("list uchar int", "list uchar bogus"),
+    lambda t: t.replace("element face 1", "element face 1 extra"),
+    lambda t: t.replace("property float y", "property float y extra"),
+])
+def test_ply_ascii_header_oddities_blender_reads_pass(tmp_path, change):
+    check_mesh_file(_write(tmp_path / "mesh.ply", change(_ply_ascii())))
+
+
+def test_ply_ascii_counts_are_checked_whatever_the_format_line(tmp_path):
+    data = _ply_ascii(vertex_count="2000000000").replace("format ascii 1.0", "format text 1.0")
+    _refused(_write(tmp_path / "mesh.ply", data), "ASCII body has only 4 lines")
+    data = _ply_ascii(vertex_count="2000000000").replace("format ascii 1.0\n", "")
+    _refused(_write(tmp_path / "none.ply", data), "ASCII body has only 4 lines")
+
+
+@pytest.mark.parametrize("old, new, words", [
+    (b"property float y", b"property quad y", ["binary PLY", "unknown property type 'quad'"]),
+    (b"list uchar int", b"list float int", ["binary PLY", "count type 'float'"]),
+    (b"list uchar int", b"list uchar bogus", ["binary PLY", "unknown property type 'bogus'"]),
+])
+def test_binary_ply_with_types_of_unknown_size(tmp_path, old, new, words):
+    # The counts cannot be checked against the file size without each property's size.
+    data = _ply_binary(face_count=2_000_000_000).replace(old, new)
+    _refused(_write(tmp_path / "mesh.ply", data), *words)
+
+
 @pytest.mark.parametrize("change, words", [
-    (lambda t: t.replace("format ascii 1.0", "format text 1.0"), ["format 'text 1.0'"]),
-    (lambda t: t.replace("format ascii 1.0", "format ascii one"), ["version 'one'"]),
-    (lambda t: t.replace("format ascii 1.0\n", ""), ["no 'format' line"]),
-    (lambda t: t.replace("property float y", "property quad y"), ["unknown property type 'quad'"]),
-    (lambda t: t.replace("list uchar int", "list float int"), ["count type 'float'"]),
-    (lambda t: t.replace("list uchar int", "list uchar bogus"), ["unknown property type 'bogus'"]),
     (lambda t: t.replace("end_header\n", "end_header\n", 1).replace("end_header", "stop"),
      ["no 'end_header'"]),
     (lambda t: "xyz\n" + t[4:], ["not a PLY file"]),
@@ -205,6 +233,11 @@ def test_utf16_obj_with_a_byte_order_mark_passes(tmp_path, encoding, monkeypatch
     text = "# a box\r\n" + OBJ.replace("\n", "\r\n")
     data = "\ufeff".encode(encoding) + text.encode(encoding)
     check_mesh_file(_write(tmp_path / "box.obj", data))
+
+
+@pytest.mark.parametrize("encoding", ["utf-16-le", "utf-16-be"])
+def test_utf16_obj_without_a_byte_order_mark_passes(tmp_path, encoding):
+    check_mesh_file(_write(tmp_path / "box.obj", ("# box\n" + OBJ).encode(encoding)))
 
 
 def test_utf16_obj_is_still_checked(tmp_path):
