@@ -282,8 +282,11 @@ def check_ply(path, size):
 # ----------------------------------------------------------------------------------- STL
 
 def check_stl(path, size):
+    # Blender's importers read an STL as binary exactly when its size is 84 + 50 x the
+    # triangle count of its header, and as ASCII otherwise, 'solid' first or not.
     with open(path, "rb") as stream:
         head = stream.read(84)
+    count = None
     if len(head) == 84:
         (count,) = struct.unpack("<I", head[80:84])
         if size == 84 + 50 * count:
@@ -293,17 +296,18 @@ def check_stl(path, size):
                 raise MeshFileError(path, f"{count} triangles is more than the limit of "
                                           f"{MAX_ELEMENT_COUNT}")
             return
+    for chunk in _overlapping_chunks(path, 16):
+        if b"facet" in chunk:
+            return
     if head.lstrip()[:5].lower() == b"solid":
-        for chunk in _overlapping_chunks(path, 16):
-            if b"facet" in chunk:
-                return
         raise MeshFileError(path, "ASCII STL without any 'facet': nothing to draw")
-    if len(head) < 84:
+    if count is None:
         raise MeshFileError(path, f"not an STL file: {size} bytes is too short for a binary "
-                                  f"STL (84 bytes of header) and it does not start with 'solid'")
+                                  f"STL (84 bytes of header) and there is no 'facet' of an "
+                                  f"ASCII STL")
     raise MeshFileError(path, f"not an STL file: a binary STL's header says {count} triangles, "
                               f"which needs exactly {84 + 50 * count} bytes, but the file has "
-                              f"{size}; and it does not start with 'solid' (ASCII STL)")
+                              f"{size}; and read as an ASCII STL it has no 'facet'")
 
 
 def _overlapping_chunks(path, overlap):

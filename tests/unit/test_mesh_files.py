@@ -207,6 +207,15 @@ def test_stl_size_must_match_exactly(tmp_path):
     _refused(_write(tmp_path / "long.stl", _stl_binary(2) + b"\0"), "needs exactly 184 bytes")
 
 
+@pytest.mark.parametrize("data", [
+    STL_ASCII.replace("solid t\n", "").replace("endsolid t\n", ""),
+    b"\xef\xbb\xbf" + STL_ASCII.encode(),
+])
+def test_ascii_stl_without_solid_first_passes(tmp_path, data):
+    # Blender reads any STL whose size is not a binary one's as ASCII and imports these.
+    check_mesh_file(_write(tmp_path / "facets.stl", data))
+
+
 def test_stl_without_triangles(tmp_path):
     _refused(_write(tmp_path / "empty.stl", _stl_binary(0)), "0 triangles")
     _refused(_write(tmp_path / "nofacet.stl", "solid t\nendsolid t\n"), "without any 'facet'")
