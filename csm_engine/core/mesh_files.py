@@ -180,9 +180,9 @@ def check_ply(path, size):
     lines = text.replace("\r", "").split("\n")
     if lines[0].strip() != "ply":
         raise MeshFileError(path, "not a PLY file (the first line is not 'ply')")
-    # Blender's importers read past what this check used to refuse: extra words after a
-    # header line's fields, a format version that is not a number, property types they do
-    # not know in an ASCII body. Only what decides how much the importer reads is checked.
+    # Blender's importers read headers with extra words after a line's fields, a format
+    # version that is not a number, or property types they do not know in an ASCII body;
+    # only what decides how much the importer reads (counts, sizes) is checked.
     file_format = None
     unsized = None      # why a binary body's size cannot be checked, if it cannot
     elements = []

@@ -3,9 +3,10 @@
 Every OBJ, PLY, STL, glTF and GLB file of Debian's ``assimp-testmodels`` package (real
 exports, odd encodings, broken and hostile files collected by the assimp project) goes
 through ``core/mesh_files.py``'s checks in this process, and through Blender's importer
-(the add-on's own importer calls, ``importer_compatibility_driver.py``) in pip bpy 5.0
+(the add-on's own importer calls, ``importer_compatibility_driver.py``) on each host (pip
+bpy 5.0 and 4.2, whose PLY, STL and OBJ importers are C++, and Debian's Blender 3.4) in
 subprocesses that import one file after another; when one dies or hangs, a fresh one
-carries on with the next file. The checks exist to stop what Blender cannot survive, so the
+carries on with the next file. The whole sweep takes a few seconds per host. The checks exist to stop what Blender cannot survive, so the
 test fails on a file Blender imports with faces that the checks refuse, and on a file the
 checks pass that crashes or hangs Blender.
 """
