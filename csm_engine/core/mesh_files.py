@@ -8,11 +8,15 @@ would block or never end; sizes are within limits; and the headers agree with th
 matches its size exactly, an OBJ has faces whose vertex indices exist). Blender's C++
 importers abort the whole process on some malformed headers (a PLY count that is not a
 number), and report success with an empty mesh on others; both are refused here with one
-line naming the file and the problem. Plain standard library: no Blender, no numpy.
+line naming the file and the problem. Nothing else is refused: what the importers skip or
+read (header lines of other exporters, comments, UTF-16 OBJ text) goes on to them, since
+the checks are there to stop what Blender cannot survive, not to enforce each format's
+letter. Plain standard library: no Blender, no numpy.
 
 ``check_mesh_file(path)`` is the entry point; it raises ``MeshFileError``.
 """
 
+import codecs
 import json
 import os
 import re
@@ -176,7 +180,11 @@ def check_ply(path, size):
     lines = text.replace("\r", "").split("\n")
     if lines[0].strip() != "ply":
         raise MeshFileError(path, "not a PLY file (the first line is not 'ply')")
+    # Blender's importers read headers with extra words after a line's fields, a format
+    # version that is not a number, or property types they do not know in an ASCII body;
+    # only what decides how much the importer reads (counts, sizes) is checked.
     file_format = None
+    unsized = None      # why a binary body's size cannot be checked, if it cannot
     elements = []
     for number, line in enumerate(lines[1:], start=2):
         words = line.split()
@@ -187,18 +195,10 @@ def check_ply(path, size):
         if keyword == "end_header":
             break
         if keyword == "format":
-            if len(words) != 3 or words[1] not in _PLY_FORMATS:
-                raise MeshFileError(path, f"{where}: format {_shown(' '.join(words[1:]))!r} is "
-                                          f"not one of {', '.join(_PLY_FORMATS)} followed by "
-                                          f"a version")
-            try:
-                float(words[2])
-            except ValueError:
-                raise MeshFileError(path, f"{where}: format version {_shown(words[2])!r} is "
-                                          f"not a number") from None
-            file_format = words[1]
+            if len(words) >= 2 and words[1] in _PLY_FORMATS:
+                file_format = words[1]
         elif keyword == "element":
-            if len(words) != 3:
+            if len(words) < 3:
                 raise MeshFileError(path, f"{where}: expected 'element <name> <count>', got "
                                           f"{_shown(line)!r}")
             name, count_text = words[1], words[2]
@@ -212,32 +212,37 @@ def check_ply(path, size):
             elements.append(_PlyElement(name, count))
         elif keyword == "property":
             if not elements:
+                # Blender 4.2's importer dies on this (segmentation fault).
                 raise MeshFileError(path, f"{where}: a property before any element")
             element = elements[-1]
             if len(words) >= 2 and words[1] == "list":
-                if len(words) != 5:
+                if len(words) < 5:
                     raise MeshFileError(path, f"{where}: expected 'property list <count type> "
                                               f"<item type> <name>', got {_shown(line)!r}")
                 count_type, item_type, name = words[2], words[3], words[4]
                 if count_type not in _PLY_INTEGER_TYPES:
-                    raise MeshFileError(path, f"{where}: list count type {_shown(count_type)!r} "
-                                              f"is not an integer type")
-                if item_type not in _PLY_TYPE_BYTES:
-                    raise MeshFileError(path, f"{where}: unknown property type "
-                                              f"{_shown(item_type)!r}")
-                element.properties.append((name, None, _PLY_TYPE_BYTES[count_type]))
+                    unsized = unsized or (f"{where}: list count type {_shown(count_type)!r} "
+                                          f"is not an integer type")
+                elif item_type not in _PLY_TYPE_BYTES:
+                    unsized = unsized or f"{where}: unknown property type {_shown(item_type)!r}"
+                element.properties.append((name, None, _PLY_TYPE_BYTES.get(count_type, 0)))
             else:
-                if len(words) != 3:
+                if len(words) < 3:
                     raise MeshFileError(path, f"{where}: expected 'property <type> <name>', "
                                               f"got {_shown(line)!r}")
                 if words[1] not in _PLY_TYPE_BYTES:
-                    raise MeshFileError(path, f"{where}: unknown property type "
-                                              f"{_shown(words[1])!r}")
-                element.properties.append((words[2], _PLY_TYPE_BYTES[words[1]], None))
-        else:
-            raise MeshFileError(path, f"{where}: unknown header keyword {_shown(keyword)!r}")
+                    unsized = unsized or f"{where}: unknown property type {_shown(words[1])!r}"
+                element.properties.append((words[2], _PLY_TYPE_BYTES.get(words[1], 0), None))
+        # Any other line (a "Created by Blender3D 247" that Blender itself once wrote, a
+        # keyword of some other exporter) is skipped by Blender's importers as by this check.
     if file_format is None:
-        raise MeshFileError(path, "no 'format' line in the PLY header")
+        # Some importers read a PLY without a known format line as ASCII, others refuse
+        # it; its body is checked as ASCII, the most a reader can take from it.
+        file_format = "ascii"
+    if file_format != "ascii" and unsized is not None:
+        # The size of an instance is unknown, so the counts cannot be checked against the
+        # file (and Blender's importers cannot read such a binary body anyway).
+        raise MeshFileError(path, f"binary PLY: {unsized}")
     by_name = {element.name: element for element in elements}
     vertex = by_name.get("vertex")
     names = {name for name, _, _ in vertex.properties} if vertex else set()
@@ -277,8 +282,11 @@ def check_ply(path, size):
 # ----------------------------------------------------------------------------------- STL
 
 def check_stl(path, size):
+    # Blender's importers read an STL as binary exactly when its size is 84 + 50 x the
+    # triangle count of its header, and as ASCII otherwise, 'solid' first or not.
     with open(path, "rb") as stream:
         head = stream.read(84)
+    count = None
     if len(head) == 84:
         (count,) = struct.unpack("<I", head[80:84])
         if size == 84 + 50 * count:
@@ -288,17 +296,18 @@ def check_stl(path, size):
                 raise MeshFileError(path, f"{count} triangles is more than the limit of "
                                           f"{MAX_ELEMENT_COUNT}")
             return
+    for chunk in _overlapping_chunks(path, 16):
+        if b"facet" in chunk:
+            return
     if head.lstrip()[:5].lower() == b"solid":
-        for chunk in _overlapping_chunks(path, 16):
-            if b"facet" in chunk:
-                return
         raise MeshFileError(path, "ASCII STL without any 'facet': nothing to draw")
-    if len(head) < 84:
+    if count is None:
         raise MeshFileError(path, f"not an STL file: {size} bytes is too short for a binary "
-                                  f"STL (84 bytes of header) and it does not start with 'solid'")
+                                  f"STL (84 bytes of header) and there is no 'facet' of an "
+                                  f"ASCII STL")
     raise MeshFileError(path, f"not an STL file: a binary STL's header says {count} triangles, "
                               f"which needs exactly {84 + 50 * count} bytes, but the file has "
-                              f"{size}; and it does not start with 'solid' (ASCII STL)")
+                              f"{size}; and read as an ASCII STL it has no 'facet'")
 
 
 def _overlapping_chunks(path, overlap):
@@ -359,6 +368,36 @@ def _check_mtl(obj_path, mtl_path):
                 _check_referenced(obj_path, folders, name, what)
 
 
+_UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
+
+
+def _obj_text_chunks(path):
+    """The OBJ's text as UTF-8 chunks. Blender's OBJ importer reads UTF-16 files too (with
+    a byte-order mark, or without one: text whose first character has a zero byte on one
+    side), so those are decoded first, a chunk at a time; a UTF-8 byte-order mark is
+    dropped."""
+    with open(path, "rb") as stream:
+        start = stream.read(3)
+    chunks = _chunks(path)
+    encoding = None
+    if start[:2] in _UTF16_BOMS:
+        encoding = "utf-16"
+    elif len(start) >= 2 and start[0] != 0 and start[1] == 0:
+        encoding = "utf-16-le"
+    elif len(start) >= 2 and start[0] == 0 and start[1] != 0:
+        encoding = "utf-16-be"
+    if encoding is not None:
+        decoder = codecs.getincrementaldecoder(encoding)(errors="replace")
+        for chunk in chunks:
+            yield decoder.decode(chunk).encode("utf-8")
+        yield decoder.decode(b"", final=True).encode("utf-8")
+        return
+    for chunk in chunks:
+        if start == codecs.BOM_UTF8:
+            chunk, start = chunk[3:], b""
+        yield chunk
+
+
 def check_obj(path, size):
     folder = os.path.dirname(path)
     vertices = 0
@@ -369,7 +408,7 @@ def check_obj(path, size):
     first_bad = None
     remainder = b""
     line_number = 0
-    for chunk in _chunks(path):
+    for chunk in _obj_text_chunks(path):
         lines = (remainder + chunk).split(b"\n")
         remainder = lines.pop()
         for line in lines:
