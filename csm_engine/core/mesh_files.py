@@ -11,9 +11,12 @@ number), and report success with an empty mesh on others; both are refused here 
 line naming the file and the problem. Nothing else is refused: what the importers skip or
 read (header lines of other exporters, comments, UTF-16 OBJ text) goes on to them, since
 the checks are there to stop what Blender cannot survive, not to enforce each format's
-letter. Plain standard library: no Blender, no numpy.
+letter. Given allowed folders, it also keeps the importer inside them: a referenced file
+that resolves (symbolic links followed) outside them and the mesh file's own folder is
+refused, so a scene cannot make Blender read the rest of the disk. Plain standard library:
+no Blender, no numpy.
 
-``check_mesh_file(path)`` is the entry point; it raises ``MeshFileError``.
+``check_mesh_file(path, allowed_folders)`` is the entry point; it raises ``MeshFileError``.
 """
 
 import codecs
@@ -171,7 +174,7 @@ def _read_ply_header(path):
     return head[:end.end()], end.end()
 
 
-def check_ply(path, size):
+def check_ply(path, size, allowed=None):
     header, body_start = _read_ply_header(path)
     try:
         text = header.decode("ascii")
@@ -281,7 +284,7 @@ def check_ply(path, size):
 
 # ----------------------------------------------------------------------------------- STL
 
-def check_stl(path, size):
+def check_stl(path, size, allowed=None):
     # Blender's importers read an STL as binary exactly when its size is 84 + 50 x the
     # triangle count of its header, and as ASCII otherwise, 'solid' first or not.
     with open(path, "rb") as stream:
@@ -341,18 +344,41 @@ def _line_paths(rest):
     return candidates
 
 
-def _check_referenced(owner, folders, name, what):
-    """Refuse a referenced file that exists but is not a regular file. Missing files are
-    left to the importer, which reports them as warnings and goes on."""
+ALLOW_HINT = "allow other folders with the Allowed Folders preference or --allow-folder"
+
+
+def is_inside(path, folders):
+    """Whether ``path``, symbolic links resolved, lies in one of ``folders`` (resolved too)."""
+    real = os.path.realpath(path)
+    for folder in folders:
+        root = os.path.realpath(folder)
+        if real == root or real.startswith(root.rstrip(os.sep) + os.sep):
+            return True
+    return False
+
+
+def confine(owner, target, reference, allowed):
+    """Refuse ``target`` (what ``owner`` names as ``reference``) when it resolves outside
+    the ``allowed`` folders; the first of them is the scene's folder. ``None``: no limit."""
+    if allowed is not None and not is_inside(target, allowed):
+        where = allowed[0] if allowed else os.path.dirname(os.path.abspath(owner))
+        raise MeshFileError(owner, f"{reference} is outside the scene's folder {where} ({ALLOW_HINT})")
+
+
+def _check_referenced(owner, folders, name, what, allowed=None, keyword=None):
+    """Refuse a referenced file that exists but is not a regular file, or lies outside the
+    allowed folders. Missing files are left to the importer, which reports them as
+    warnings and goes on (and reads nothing)."""
     for folder in folders:
         candidate = os.path.join(folder, name)
         if os.path.lexists(candidate):
+            confine(owner, candidate, f"{keyword or what} {_shown(name, 80)}", allowed)
             regular_file_size(candidate, owner, what)
             return candidate
     return None
 
 
-def _check_mtl(obj_path, mtl_path):
+def _check_mtl(obj_path, mtl_path, allowed=None):
     text = read_regular_file(mtl_path, MAX_MTL_BYTES, obj_path, "material library")
     folders = [os.path.dirname(mtl_path), os.path.dirname(obj_path)]
     for line in text.splitlines():
@@ -365,7 +391,8 @@ def _check_mtl(obj_path, mtl_path):
             rest = words[1].decode("utf-8", "replace")
             what = f"{_shown(words[0])} texture of {os.path.basename(mtl_path)}"
             for name in _line_paths(rest):
-                _check_referenced(obj_path, folders, name, what)
+                _check_referenced(obj_path if allowed is None else mtl_path, folders, name,
+                                  what, allowed, words[0].decode("utf-8", "replace"))
 
 
 _UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
@@ -398,7 +425,7 @@ def _obj_text_chunks(path):
         yield chunk
 
 
-def check_obj(path, size):
+def check_obj(path, size, allowed=None):
     folder = os.path.dirname(path)
     vertices = 0
     faces = 0
@@ -414,11 +441,13 @@ def check_obj(path, size):
         for line in lines:
             line_number += 1
             vertices, faces, smallest_needed, first_bad = _obj_line(
-                path, folder, line, line_number, vertices, faces, smallest_needed, first_bad)
+                path, folder, line, line_number, vertices, faces, smallest_needed, first_bad,
+                allowed)
     if remainder:
         line_number += 1
         vertices, faces, smallest_needed, first_bad = _obj_line(
-            path, folder, remainder, line_number, vertices, faces, smallest_needed, first_bad)
+            path, folder, remainder, line_number, vertices, faces, smallest_needed, first_bad,
+            allowed)
     if faces == 0:
         raise MeshFileError(path, "OBJ without any face ('f' line): nothing to draw")
     if vertices == 0:
@@ -430,7 +459,8 @@ def check_obj(path, size):
                                   f"file has {vertices} vertices{detail})")
 
 
-def _obj_line(path, folder, line, line_number, vertices, faces, smallest_needed, first_bad):
+def _obj_line(path, folder, line, line_number, vertices, faces, smallest_needed, first_bad,
+              allowed=None):
     stripped = line.lstrip()
     if stripped.startswith(b"v ") or stripped.startswith(b"v\t"):
         return vertices + 1, faces, smallest_needed, first_bad
@@ -457,9 +487,10 @@ def _obj_line(path, folder, line, line_number, vertices, faces, smallest_needed,
     if stripped.startswith(b"mtllib"):
         rest = stripped[len(b"mtllib"):].decode("utf-8", "replace")
         for name in _line_paths(rest):
-            mtl = _check_referenced(path, [folder], name, "material library")
+            mtl = _check_referenced(path, [folder], name, "material library", allowed,
+                                    "mtllib")
             if mtl is not None:
-                _check_mtl(path, mtl)
+                _check_mtl(path, mtl, allowed)
     return vertices, faces, smallest_needed, first_bad
 
 
@@ -499,7 +530,7 @@ def _gltf_document(path, size):
     return document
 
 
-def check_gltf(path, size):
+def check_gltf(path, size, allowed=None):
     document = _gltf_document(path, size)
     folder = os.path.dirname(path)
     for key, what, required in (("buffers", "buffer file", True), ("images", "image", False)):
@@ -513,6 +544,7 @@ def check_gltf(path, size):
             target = os.path.join(folder, unquote(uri))
             if "\x00" in target:
                 raise MeshFileError(path, f"{key}[{index}].uri contains a NUL character")
+            confine(path, target, f"{key}[{index}].uri {_shown(uri, 80)}", allowed)
             if not os.path.lexists(target):
                 if required:
                     raise MeshFileError(path, f"needs buffer file {target} ({key}[{index}].uri), "
@@ -527,9 +559,17 @@ _CHECKS = MappingProxyType({".ply": check_ply, ".stl": check_stl, ".obj": check_
                             ".gltf": check_gltf, ".glb": check_gltf})
 
 
-def check_mesh_file(path):
-    """Raise ``MeshFileError`` unless ``path`` is safe to hand to Blender's importer."""
+def check_mesh_file(path, allowed_folders=None):
+    """Raise ``MeshFileError`` unless ``path`` is safe to hand to Blender's importer.
+
+    ``allowed_folders``: the scene's folder first, then any others the user allowed; every
+    file the mesh file references must resolve inside them or the mesh file's own folder.
+    ``None`` checks no folders (a bare file check, as the compatibility sweep needs)."""
     path = os.fspath(path)
+    allowed = None
+    if allowed_folders is not None:
+        allowed = [os.fspath(folder) for folder in allowed_folders]
+        allowed.append(os.path.dirname(os.path.abspath(path)))
     size = regular_file_size(path, what="mesh file")
     if size > MAX_MESH_FILE_BYTES:
         raise MeshFileError(path, f"{size} bytes is larger than the limit for mesh files "
@@ -539,6 +579,6 @@ def check_mesh_file(path):
     check = _CHECKS.get(os.path.splitext(path)[1].lower())
     if check is not None:
         try:
-            check(path, size)
+            check(path, size, allowed)
         except OSError as err:
             raise MeshFileError(path, f"cannot read the file ({err.strerror or err})") from None
