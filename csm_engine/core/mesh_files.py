@@ -372,7 +372,7 @@ def _check_referenced(owner, folders, name, what, allowed=None, keyword=None):
     for folder in folders:
         candidate = os.path.join(folder, name)
         if os.path.lexists(candidate):
-            confine(owner, candidate, f"{keyword or what} {_shown(name, 80)}", allowed)
+            confine(owner, candidate, f"{keyword or what} {_shown(name, 400)}", allowed)
             regular_file_size(candidate, owner, what)
             return candidate
     return None
@@ -544,7 +544,7 @@ def check_gltf(path, size, allowed=None):
             target = os.path.join(folder, unquote(uri))
             if "\x00" in target:
                 raise MeshFileError(path, f"{key}[{index}].uri contains a NUL character")
-            confine(path, target, f"{key}[{index}].uri {_shown(uri, 80)}", allowed)
+            confine(path, target, f"{key}[{index}].uri {_shown(uri, 400)}", allowed)
             if not os.path.lexists(target):
                 if required:
                     raise MeshFileError(path, f"needs buffer file {target} ({key}[{index}].uri), "

@@ -337,3 +337,105 @@ def test_invalid_gltf_json(tmp_path):
 def test_mesh_file_larger_than_the_limit(tmp_path, monkeypatch):
     monkeypatch.setattr(mesh_files, "MAX_MESH_FILE_BYTES", 10)
     _refused(_write(tmp_path / "m.obj", OBJ), "larger than the limit for mesh files")
+
+
+# ---------------------------------------------------------------- staying inside the scene
+
+def _outside(path, allowed, *words):
+    with pytest.raises(MeshFileError) as info:
+        check_mesh_file(path, allowed)
+    message = str(info.value)
+    assert "\n" not in message, message
+    for word in ("is outside the scene's folder", "--allow-folder") + words:
+        assert word in message, (word, message)
+    return message
+
+
+@pytest.fixture
+def tree(tmp_path):
+    """A scene folder and, beside it, a folder of private files."""
+    scene, private = tmp_path / "scene", tmp_path / "private"
+    _write(private / "secret.png", b"not an image")
+    _write(private / "lib.mtl", "newmtl m\nKd 1 1 1\n")
+    _write(private / "data.bin", bytes(36))
+    return scene, private
+
+
+def test_obj_mtllib_outside_the_scene_is_refused_and_allowed_with_the_option(tree):
+    scene, private = tree
+    obj = _write(scene / "box.obj", f"mtllib {private / 'lib.mtl'}\n" + OBJ)
+    _outside(obj, [str(scene)], obj + ": mtllib", "lib.mtl", str(scene))
+    relative = _write(scene / "rel.obj", "mtllib ../private/lib.mtl\n" + OBJ)
+    _outside(relative, [str(scene)], "mtllib ../private/lib.mtl")
+    check_mesh_file(obj, [str(scene), str(private)])
+    check_mesh_file(obj)        # no folders given: no confinement
+
+
+def test_mtl_map_outside_the_scene_is_refused_naming_the_mtl(tree):
+    scene, private = tree
+    mtl = _write(scene / "box.mtl", f"newmtl m\nmap_Kd {private / 'secret.png'}\n")
+    obj = _write(scene / "box.obj", "mtllib box.mtl\n" + OBJ)
+    message = _outside(obj, [str(scene)], "map_Kd", "secret.png")
+    assert message.startswith(mtl + ": map_Kd "), message
+    for keyword in ("bump", "refl", "map_Bump -bm 0.5", "disp", "norm", "map_Ks"):
+        _write(scene / "box.mtl", f"newmtl m\n{keyword} ../private/secret.png\n")
+        _outside(obj, [str(scene)], keyword.split()[0])
+    check_mesh_file(obj, [str(scene), str(private)])
+
+
+def test_mtl_map_in_the_scene_or_the_mesh_folder_passes(tmp_path):
+    scene = tmp_path / "scene"
+    _write(scene / "textures/wood.png", b"png")
+    _write(scene / "models/box.mtl", "newmtl m\nmap_Kd ../textures/wood.png\nmap_Ka gone.png\n")
+    obj = _write(scene / "models/box.obj", "mtllib box.mtl\n" + OBJ)
+    check_mesh_file(obj, [str(scene)])
+    # The mesh file's own folder is allowed even when the scene folder is elsewhere.
+    _write(scene / "models/box.mtl", "newmtl m\nmap_Kd box.mtl\n")
+    check_mesh_file(obj, [str(tmp_path / "other")])
+
+
+def _gltf(key, uri):
+    document = {"asset": {"version": "2.0"}, key: [{"uri": uri, "byteLength": 36}]}
+    return json.dumps(document)
+
+
+def test_gltf_image_uri_outside_the_scene_is_refused(tree):
+    scene, private = tree
+    path = _write(scene / "m.gltf", _gltf("images", "../private/secret.png"))
+    message = _outside(path, [str(scene)], "images[0].uri ../private/secret.png")
+    assert message.startswith(path + ": "), message
+    absolute = _write(scene / "a.gltf", _gltf("images", str(private / "secret.png")))
+    _outside(absolute, [str(scene)], "images[0].uri")
+    escaped = _write(scene / "e.gltf", _gltf("images", "..%2Fprivate%2Fsecret.png"))
+    _outside(escaped, [str(scene)], "images[0].uri")
+    check_mesh_file(path, [str(scene), str(private)])
+
+
+def test_gltf_buffer_uri_outside_the_scene_is_refused(tree):
+    scene, private = tree
+    path = _write(scene / "m.gltf", _gltf("buffers", "../private/data.bin"))
+    _outside(path, [str(scene)], "buffers[0].uri ../private/data.bin")
+    check_mesh_file(path, [str(scene), str(private)])
+
+
+def test_a_symlink_inside_pointing_outside_is_refused(tree):
+    scene, private = tree
+    _write(scene / "placeholder", b"")
+    os.symlink(private / "secret.png", scene / "texture.png")
+    os.symlink(private, scene / "linked")
+    path = _write(scene / "m.gltf", _gltf("images", "texture.png"))
+    _outside(path, [str(scene)], "images[0].uri texture.png")
+    obj = _write(scene / "box.obj", "mtllib linked/lib.mtl\n" + OBJ)
+    _outside(obj, [str(scene)], "mtllib linked/lib.mtl")
+    check_mesh_file(path, [str(scene), str(private)])
+    check_mesh_file(obj, [str(scene), str(private)])
+
+
+def test_a_symlinked_scene_folder_still_counts_as_inside(tmp_path):
+    real = tmp_path / "real"
+    _write(real / "tex.png", b"png")
+    path = _write(real / "m.gltf", _gltf("images", "tex.png"))
+    os.symlink(real, tmp_path / "link")
+    check_mesh_file(str(tmp_path / "link" / "m.gltf"), [str(tmp_path / "link")])
+    assert mesh_files.is_inside(str(real / "tex.png"), [str(tmp_path / "link")])
+    assert not mesh_files.is_inside(str(tmp_path / "realx"), [str(real)])
