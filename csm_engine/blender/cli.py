@@ -51,6 +51,11 @@ def build_parser(prog="python -m csm_engine"):
                         metavar="SETTING=VALUE",
                         help="override a CSM setting, e.g. --set pcf_radius=2 "
                              "--set debug_view=CASCADES (repeatable)")
+    parser.add_argument("--allow-folder", dest="allowed_folders", action="append", default=[],
+                        metavar="DIR",
+                        help="let the scene's meshes, material libraries, textures and glTF "
+                             "buffers be read from DIR too (repeatable; by default only the "
+                             "scene's folder and each mesh file's folder)")
     parser.add_argument("--list-settings", action="store_true",
                         help="print every setting (identifier, default or --set value, unit, "
                              "allowed values, what it does) and exit")
@@ -124,11 +129,12 @@ def ensure_registered():
     register()
 
 
-def open_scene(scene_path=None, overrides=(), resolution=None):
+def open_scene(scene_path=None, overrides=(), resolution=None, allowed_folders=()):
     """The one session set-up every command shares: reset Blender to an empty factory
     scene, register the add-on, import ``scene_path`` (None: an empty scene; "default":
-    the bundled scene), apply ``--set`` overrides, and size the render. Returns the scene.
-    A broken scene file or setting raises CLIError with a one-line reason."""
+    the bundled scene) reading also from ``allowed_folders`` (``--allow-folder``), apply
+    ``--set`` overrides, and size the render. Returns the scene. A broken scene file or
+    setting raises CLIError with a one-line reason."""
     import bpy
     from ..core import scene_format
     from . import scene_builder
@@ -140,7 +146,8 @@ def open_scene(scene_path=None, overrides=(), resolution=None):
         scene_path = paths.default_scene_path()
     if scene_path is not None:
         try:
-            scene_builder.import_scene_file(scene_path, scene)
+            scene_builder.import_scene_file(scene_path, scene,
+                                            allowed_folders=allowed_folders)
         except (scene_format.SceneFormatError, scene_builder.SceneImportError) as error:
             raise CLIError(str(error), EXIT_SCENE)
     for override in overrides:
@@ -417,7 +424,7 @@ def run(argv, prog="python -m csm_engine"):
     scene_path = args.scene or paths.default_scene_path()
     shot = screenshot_path(DEFAULT_SCREENSHOT if args.screenshot is None else args.screenshot,
                            scene_path)
-    scene = open_scene(scene_path, args.overrides, resolution)
+    scene = open_scene(scene_path, args.overrides, resolution, args.allowed_folders)
     render = scene.render
     render.engine = "CSM"
     render.image_settings.file_format = 'PNG'

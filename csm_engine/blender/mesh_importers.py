@@ -3,7 +3,8 @@
 Owns finding the importer for a mesh file's extension (glTF, OBJ, PLY, STL: the operators
 of this Blender, enabling a bundled add-on when needed, with the options that read Y-up
 files), planning an import (``plan``: every mesh path resolved, its importer found and the
-file checked by ``core/mesh_files.py`` before any datablock is created), and running one
+file checked by ``core/mesh_files.py`` before any datablock is created, and every file
+read kept inside the scene's folder tree and the folders the user allowed), and running one
 importer (``import_objects``): its output captured, its failure turned into one line, its
 result checked for faces, and glTF materials tagged with the course's surface convention.
 Where the imported objects go is ``object_builders``'s part.
@@ -16,7 +17,7 @@ import re
 import bpy
 import numpy as np
 
-from ..core import mesh_files, scene_format
+from ..core import mesh_files, paths, scene_format
 from ..core.captured_output import CapturedOutput
 from . import compat
 from .materials import COURSE_SURFACE_TAG
@@ -118,12 +119,55 @@ def _find_importer(extension):
     return None
 
 
-def _check_mesh_file(mesh_path, scene_path, json_path):
+def allowed_folders(scene_path, extra_folders=()):
+    """The folders a scene's importers may read from: the scene file's folder first (the
+    one error messages name), then the add-on's own data folder (read-only files it ships,
+    whose scenes name meshes in a sibling folder), then the folders the user allowed."""
+    folders = [os.path.dirname(os.path.abspath(scene_path)), paths.data_dir()]
+    for folder in extra_folders:
+        folder = folder.strip()
+        if folder:
+            folders.append(os.path.abspath(os.path.expanduser(folder)))
+    return folders
+
+
+def _course_root(mesh, mesh_path, scene_path, cwd):
+    """The folder a relative mesh path without '..' was found under when that is the current
+    folder or an ancestor of the scene's folder (course files name meshes from the project
+    root while living in ``data/scenes/``); None otherwise. The filesystem root never
+    counts: it would let a scene name any file on the disk."""
+    mesh = os.path.normpath(mesh.replace("\\", "/") if os.sep == "/" else mesh)
+    if os.path.isabs(os.path.expanduser(mesh)) or mesh.split(os.sep)[0] == os.pardir:
+        return None
+    if not mesh_path.endswith(os.sep + mesh):
+        return None
+    base = mesh_path[:-len(os.sep + mesh)] or os.sep
+    scene_dir = os.path.dirname(os.path.abspath(scene_path))
+    if base == os.path.dirname(base):
+        return None
+    is_ancestor = scene_dir.startswith(base.rstrip(os.sep) + os.sep)
+    return base if is_ancestor or base == os.path.abspath(cwd) else None
+
+
+def _confine_mesh_path(mesh, mesh_path, scene_path, cwd, folders, json_path):
+    """Refuse a mesh file that resolves (symbolic links followed) outside the allowed
+    folders, unless a course file found it under its project root."""
+    roots = list(folders)
+    root = _course_root(mesh, mesh_path, scene_path, cwd)
+    if root is not None:
+        roots.append(root)
+    if not mesh_files.is_inside(mesh_path, roots):
+        raise SceneImportError(one_line(
+            f"{scene_path}: {json_path}: mesh file {mesh_path} is outside the scene's folder "
+            f"{folders[0]} ({mesh_files.ALLOW_HINT})"))
+
+
+def _check_mesh_file(mesh_path, scene_path, json_path, folders=None):
     """Refuse, before anything is created, a mesh file Blender's importer must not see:
-    one that could crash or hang it, or that would import as nothing
-    (``core/mesh_files.py``)."""
+    one that could crash or hang it, that would import as nothing, or that makes the
+    importer read a file outside ``folders`` (``core/mesh_files.py``)."""
     try:
-        mesh_files.check_mesh_file(mesh_path)
+        mesh_files.check_mesh_file(mesh_path, folders)
     except mesh_files.MeshFileError as err:
         raise SceneImportError(one_line(f"{scene_path}: {json_path}: {err}")) from None
 
@@ -143,11 +187,13 @@ class PlannedObject:
         return f"objects[{self.index}].mesh"
 
 
-def plan(scene_path, description, cwd):
+def plan(scene_path, description, cwd, extra_folders=()):
     """Every scene object as a ``PlannedObject``, or ``SceneImportError`` for the first
-    that cannot be imported: a mesh path that does not resolve, an extension without an
-    importer, a mesh file ``core/mesh_files.py`` refuses (each distinct file checked once).
-    Creates nothing."""
+    that cannot be imported: a mesh path that does not resolve or resolves outside the
+    allowed folders (``allowed_folders``; ``extra_folders`` are the user's), an extension
+    without an importer, a mesh file ``core/mesh_files.py`` refuses (each distinct file
+    checked once). Creates nothing."""
+    folders = allowed_folders(scene_path, extra_folders)
     planned = []
     importers = {}
     checked = set()
@@ -158,6 +204,7 @@ def plan(scene_path, description, cwd):
                                                        json_path=json_path)
         except scene_format.SceneFormatError as err:
             raise SceneImportError(str(err)) from None
+        _confine_mesh_path(scene_object.mesh, mesh_path, scene_path, cwd, folders, json_path)
         extension = os.path.splitext(mesh_path)[1].lower()
         if extension not in importers:
             importers[extension] = _find_importer(extension)
@@ -167,7 +214,7 @@ def plan(scene_path, description, cwd):
                 f"{scene_path}: {json_path}: this Blender has no importer for "
                 f"'{extension}' files (is the add-on for it disabled?)")
         if mesh_path not in checked:
-            _check_mesh_file(mesh_path, scene_path, json_path)
+            _check_mesh_file(mesh_path, scene_path, json_path, folders)
             checked.add(mesh_path)
         planned.append(PlannedObject(index, scene_object, mesh_path, importer))
     return planned

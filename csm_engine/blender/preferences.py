@@ -1,8 +1,9 @@
 """The add-on's preferences (Edit > Preferences > Add-ons > CSM Engine): the Shader Folder
-the GLSL is read from, and the lines that show which folder is in use.
+the GLSL is read from, the lines that show which folder is in use, and the Allowed Folders
+a scene's files may be read from besides the scene's own folder.
 
 Owns ``CSM_AddonPreferences``, reading its values (``addon_preferences``,
-``chosen_shader_folder``) and telling the shader library where the user's folder is
+``chosen_shader_folder``, ``chosen_allowed_folders``) and telling the shader library where the user's folder is
 (``register``). Blender files add-on preferences under the add-on's module name, which is
 ``csm_engine`` for the legacy add-on and for pip bpy but ``bl_ext.<repository>.csm_engine``
 for an extension: it is taken from this package's own name, never written out.
@@ -48,6 +49,18 @@ def chosen_shader_folder(context=None):
     return os.path.normpath(os.path.expanduser(bpy.path.abspath(value)))
 
 
+def chosen_allowed_folders(context=None):
+    """The Allowed Folders preference as a list of absolute, normalised paths (empty: only
+    the scene's own folder tree)."""
+    try:
+        preferences = addon_preferences(context)
+    except AttributeError:        # a context without preferences (restricted at startup)
+        return []
+    value = getattr(preferences, "allowed_folders", "")
+    return [os.path.normpath(os.path.expanduser(bpy.path.abspath(part.strip())))
+            for part in value.split(";") if part.strip()]
+
+
 def _shader_folder_changed(self, context):
     # The panel's "Shaders:" line and the hint to press F5 follow the new value.
     window_manager = getattr(context, "window_manager", None)
@@ -69,6 +82,14 @@ class CSM_AddonPreferences(bpy.types.AddonPreferences):
         default="",
         update=_shader_folder_changed,
     )
+    allowed_folders: StringProperty(
+        name="Allowed Folders",
+        description="Folders, separated by ';', that a scene's meshes, material libraries, "
+                    "textures and glTF buffers may be read from besides the scene file's "
+                    "own folder and each mesh file's folder. Empty: a scene reads nothing "
+                    "outside its folder",
+        default="",
+    )
 
     def draw(self, context):
         layout = self.layout
@@ -86,6 +107,7 @@ class CSM_AddonPreferences(bpy.types.AddonPreferences):
                 row.label(text="F5 (Reload Shaders) in the 3D viewport reads this folder",
                           icon='INFO')
         draw_shader_folder(layout, context)
+        layout.prop(self, "allowed_folders")
 
 
 def draw_shader_folder(layout, context):

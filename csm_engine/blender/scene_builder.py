@@ -33,7 +33,7 @@ import bpy
 import numpy as np
 
 from ..core import conventions, scene_format
-from . import mesh_importers, object_builders
+from . import mesh_importers, object_builders, preferences
 from .import_transaction import (OutsideChanges, SceneImportError, SceneState,
                                  clear_scene, created_since, data_snapshot, layer_collection_for,
                                  one_line, remove_datablocks, remove_import,
@@ -115,8 +115,11 @@ def _build(description, planned, scene, view_layer, scene_path, name, replace=Fa
     return collection
 
 
-def import_scene_file(path, scene=None, replace=False):
+def import_scene_file(path, scene=None, replace=False, allowed_folders=()):
     """Import the scene file at ``path`` into ``scene`` (default: the context scene).
+
+    Files are read only from the scene file's folder tree, each mesh file's folder, the
+    Allowed Folders preference and ``allowed_folders`` (the CLI's ``--allow-folder``).
 
     ``replace``: the import becomes the scene's only content (objects, collections, World;
     see ``clear_scene``); otherwise it is added, replacing only an earlier import of the
@@ -129,7 +132,8 @@ def import_scene_file(path, scene=None, replace=False):
         description = scene_format.load_scene(scene_path)
     except scene_format.SceneFormatError as err:
         raise SceneImportError(str(err)) from None
-    planned = mesh_importers.plan(scene_path, description, os.getcwd())
+    extra_folders = [*preferences.chosen_allowed_folders(), *allowed_folders]
+    planned = mesh_importers.plan(scene_path, description, os.getcwd(), extra_folders)
 
     override, view_layer = _override_for(scene)
     previous = [c for c in imported_collections(scene) if _same_file(c["csm_source"], scene_path)]
