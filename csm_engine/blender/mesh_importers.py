@@ -121,9 +121,13 @@ def _find_importer(extension):
 
 def allowed_folders(scene_path, extra_folders=()):
     """The folders a scene's importers may read from: the scene file's folder first (the
-    one error messages name), then the add-on's own data folder (read-only files it ships,
-    whose scenes name meshes in a sibling folder), then the folders the user allowed."""
-    folders = [os.path.dirname(os.path.abspath(scene_path)), paths.data_dir()]
+    one error messages name); for a scene in a ``scenes`` folder, that folder's parent (the
+    course's layout, ``data/scenes`` beside ``data/gltf``, which the bundled scenes follow);
+    the add-on's own data folder (read-only files it ships); then the user's folders."""
+    scene_dir = os.path.dirname(os.path.abspath(scene_path))
+    folders = [scene_dir, paths.data_dir()]
+    if os.path.basename(scene_dir) == "scenes":
+        folders.append(os.path.dirname(scene_dir))
     for folder in extra_folders:
         folder = folder.strip()
         if folder:
