@@ -150,3 +150,14 @@ def test_files_in_subfolders_and_the_bundled_scenes_import(scene, tmp_path):
     scene_builder.import_scene_file(path)
     # The bundled scenes name meshes in the add-on's data folder beside their own.
     scene_builder.import_scene_file(paths.default_scene_path())
+
+
+def test_a_scenes_folder_reads_its_siblings_but_not_further_up(scene, tmp_path):
+    (tmp_path / "project/data/gltf").mkdir(parents=True)
+    write_box_obj(str(tmp_path / "project/data/gltf/box.obj"), (-1, -1, -1), (1, 1, 1))
+    write_box_obj(str(tmp_path / "project/box.obj"), (-1, -1, -1), (1, 1, 1))
+    folder = str(tmp_path / "project/data/scenes")
+    sibling = write_scene(folder, "a.json", {"objects": [{"mesh": "../gltf/box.obj"}]})
+    scene_builder.import_scene_file(sibling)
+    above = write_scene(folder, "b.json", {"objects": [{"mesh": "../../box.obj"}]})
+    _refused(above, "objects[0].mesh: mesh file")
