@@ -365,14 +365,15 @@ def confine(owner, target, reference, allowed):
         raise MeshFileError(owner, f"{reference} is outside the scene's folder {where} ({ALLOW_HINT})")
 
 
-def _check_referenced(owner, folders, name, what, allowed=None, keyword=None):
+def _check_referenced(owner, folders, name, what, allowed=None, keyword=None, referrer=None):
     """Refuse a referenced file that exists but is not a regular file, or lies outside the
     allowed folders. Missing files are left to the importer, which reports them as
-    warnings and goes on (and reads nothing)."""
+    warnings and goes on (and reads nothing). ``referrer``: the file whose line names it,
+    when that is not ``owner`` (an OBJ's MTL)."""
     for folder in folders:
         candidate = os.path.join(folder, name)
         if os.path.lexists(candidate):
-            confine(owner, candidate, f"{keyword or what} {_shown(name, 400)}", allowed)
+            confine(referrer or owner, candidate, f"{keyword or what} {_shown(name, 400)}", allowed)
             regular_file_size(candidate, owner, what)
             return candidate
     return None
@@ -391,8 +392,8 @@ def _check_mtl(obj_path, mtl_path, allowed=None):
             rest = words[1].decode("utf-8", "replace")
             what = f"{_shown(words[0])} texture of {os.path.basename(mtl_path)}"
             for name in _line_paths(rest):
-                _check_referenced(obj_path if allowed is None else mtl_path, folders, name,
-                                  what, allowed, words[0].decode("utf-8", "replace"))
+                _check_referenced(obj_path, folders, name, what, allowed,
+                                  words[0].decode("utf-8", "replace"), mtl_path)
 
 
 _UTF16_BOMS = (codecs.BOM_UTF16_LE, codecs.BOM_UTF16_BE)
