@@ -302,8 +302,11 @@ def recipe(obj, simplify):
     None when the result may depend on anything else (time, other objects, shape keys,
     drivers, geometry nodes...): such objects are read and hashed at every render."""
     original = obj.original if obj.original is not None else obj
-    mesh = original.data
-    if original.type != 'MESH' or mesh is None or getattr(mesh, "attributes", None) is None:
+    # An instanced object can come back from the depsgraph with a plain ID as its
+    # original (seen for a collection instance's objects): read and hash it.
+    mesh = getattr(original, "data", None)
+    if getattr(original, "type", None) != 'MESH' or mesh is None or \
+            getattr(mesh, "attributes", None) is None:
         return None
     if getattr(mesh, "shape_keys", None) is not None or \
             _animated(original, transform_only_ok=True) or \

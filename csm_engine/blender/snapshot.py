@@ -269,7 +269,10 @@ def take(depsgraph, camera, is_viewport=False):
             # A copy: the instance (and a Matrix that wraps it) is reused by the iterator.
             matrices.append(instance.matrix_world.copy())
             if key not in mesh_sources:
-                mesh_sources[key] = obj
+                # An instance's object (a collection instance's copy) is a temporary the
+                # iterator reuses: the mesh is read later, from the evaluated original.
+                mesh_sources[key] = original.evaluated_get(depsgraph) \
+                    if instance.is_instance and original else obj
     if suns:
         obj, world_from_light = suns[0] if len(suns) == 1 else _active_sun(depsgraph, suns)
         _add_light(snap, obj, world_from_light, light_threshold)
