@@ -41,23 +41,24 @@ state in ``controls.json`` (with ``error`` None on success). The process ends wi
 ``os._exit`` so no quit dialog can block it.
 """
 
-import json
 import math
 import os
-import subprocess
 import sys
-import time
-import traceback
 
 import bpy
+
+# The shared half of the drivers sits beside this file (Blender puts no script folder
+# on sys.path).
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from gui_common import (  # noqa: E402 (after the path entry)
+    FIRST_PERSON, REPORT, STATE, click_in, count_view_draws, fresh_draws, menu_search,
+    mouse_to_viewport, pause, record, region_rect, run, screen_top, screenshot, sidebar,
+    start, until, viewport_centre_on_screen, watch_first_person, window_with, xdotool)
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 OUT_DIR = os.path.abspath(sys.argv[sys.argv.index("--") + 1]) if "--" in sys.argv else os.getcwd()
 SCENE_FILE = os.path.join(REPO, "csm_engine", "data", "scenes", "default.json")
 
-TICK_S = 0.05
-WAIT_LIMIT_S = 30.0          # one condition that never comes true fails the run with its name
-TOTAL_LIMIT_S = 150.0
 SUN_TURN_DEGREES = 40.0
 HOLD_W_S = 0.5
 DRAG_PX = (120, 40)          # mouse drag while in first person: right and up, screen pixels
@@ -82,138 +83,8 @@ STABILIZE_FROM_TOP_PX = 253  # top-left corner (same fixed window, CSM tab open)
 SUN_ROW_FROM_LEFT_PX = 100   # the Outliner's "Sun" row (fourth: Scene Collection,
 SUN_ROW_FROM_TOP_PX = 75     # default, Camera, Sun), from its top-left corner
 
-sys.dont_write_bytecode = True
 # No sys.path entry for the checkout: the add-on the user enables is the copy the test
 # installed from the legacy zip into the user scripts folder.
-
-STATE = {"started": time.monotonic(), "draws": 0, "draw_error": None, "window": None,
-         "area": None, "region": None, "condition": None, "condition_name": "",
-         "condition_since": 0.0}
-REPORT = {"error": None, "blender": bpy.app.version_string, "steps": [], "timings_s": {}}
-
-
-def log(message):
-    print(f"gui_controls: {time.monotonic() - STATE['started']:6.2f} s: {message}", flush=True)
-
-
-def finish(exit_code):
-    REPORT["timings_s"]["total"] = round(time.monotonic() - STATE["started"], 3)
-    with open(os.path.join(OUT_DIR, "controls.json"), "w") as handle:
-        json.dump(REPORT, handle, indent=2)
-    log(f"done, exit code {exit_code}")
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(exit_code)
-
-
-# --- Blender helpers ----------------------------------------------------------------------
-
-def count_view_draws():
-    """Wrap the engine's view_draw to know when the viewport has really drawn a frame."""
-    from csm_engine.blender import engine
-    original = engine.CSMRenderEngine.view_draw
-
-    def view_draw(self, context, depsgraph):
-        try:
-            original(self, context, depsgraph)
-        except Exception:
-            STATE["draw_error"] = traceback.format_exc()
-            raise
-        STATE["draws"] += 1
-
-    engine.CSMRenderEngine.view_draw = view_draw
-
-
-def region_rect(region):
-    return {"x": region.x, "y": region.y, "width": region.width, "height": region.height}
-
-
-def sidebar(area):
-    return next((r for r in area.regions if r.type == 'UI'), None)
-
-
-def viewport_centre_on_screen():
-    """The viewport's visible middle (left of the sidebar) in X screen pixels (top-left
-    origin); Blender counts window pixels from the bottom-left."""
-    window, area, region = STATE["window"], STATE["area"], STATE["region"]
-    ui = sidebar(area)
-    right = ui.x if ui is not None and ui.width > 1 and area.spaces.active.show_region_ui \
-        else region.x + region.width
-    x = (region.x + right) // 2
-    y = region.y + region.height // 2
-    return window.x + x, screen_height() - window.y - y
-
-
-def xdotool(*args):
-    subprocess.run(["xdotool", *[str(a) for a in args]], check=True, timeout=10,
-                   stdin=subprocess.DEVNULL)
-
-
-def mouse_to_viewport():
-    x, y = viewport_centre_on_screen()
-    xdotool("mousemove", x, y)
-    return x, y
-
-
-def screenshot(number, name, window=None, area=None):
-    """Save window's pixels (the main window by default) to step_<number>_<name>.png."""
-    if window is None:
-        window, area, region = STATE["window"], STATE["area"], STATE["region"]
-    else:
-        region = next(r for r in area.regions if r.type == 'WINDOW')
-    path = os.path.join(OUT_DIR, f"step_{number}_{name}.png")
-    with bpy.context.temp_override(window=window, area=area, region=region):
-        bpy.ops.screen.screenshot(filepath=path, check_existing=False)
-    if not os.path.isfile(path):
-        raise RuntimeError(f"screen.screenshot did not write {path}")
-    return os.path.basename(path)
-
-
-def menu_search(text):
-    """F3 over the viewport (menu search) and ``text`` typed; the caller presses Enter.
-    A scenario step (``yield from menu_search(...)``)."""
-    mouse_to_viewport()
-    yield pause(0.2)
-    xdotool("key", "F3")
-    yield pause(0.5)
-    xdotool("type", "--delay", 20, text)
-    yield pause(0.6)
-
-
-def click_in(window, region, x, y):
-    """Move the mouse to (x, y) pixels from the region's top-left corner and click; a
-    scenario step (``yield from click_in(...)``)."""
-    xdotool("mousemove", window.x + region.x + x, screen_top(window, region) + y)
-    yield pause(0.2)
-    xdotool("click", "1")
-
-
-def screen_top(window, region):
-    """The region's top edge in X screen pixels. Blender counts window and region positions
-    from the bottom-left: the window's from the screen's, the region's from the window's."""
-    return screen_height() - window.y - (region.y + region.height)
-
-
-def screen_height():
-    if "screen_height" not in STATE:
-        size = subprocess.run(["xdotool", "getdisplaygeometry"], check=True, timeout=10,
-                              capture_output=True, text=True, stdin=subprocess.DEVNULL)
-        STATE["screen_height"] = int(size.stdout.split()[1])
-    return STATE["screen_height"]
-
-
-def window_with(area_type):
-    """(window, area) of the first window showing an area of that type, or None."""
-    for window in bpy.context.window_manager.windows:
-        for area in window.screen.areas:
-            if area.type == area_type:
-                return window, area
-    return None
-
-
-def file_browser():
-    return window_with('FILE_BROWSER')
-
 
 def sun():
     from csm_engine.blender import light_controls
@@ -236,40 +107,8 @@ def camera_state():
             "matrix": [[float(v) for v in row] for row in matrix]}
 
 
-def record(number, name, shot, **state):
-    entry = {"number": number, "name": name, "screenshot": shot, "draws": STATE["draws"],
-             "seconds": round(time.monotonic() - STATE["started"], 3),
-             "viewport_region": region_rect(STATE["region"]) if STATE["region"] else None}
-    ui = sidebar(STATE["area"]) if STATE["area"] else None
-    entry["sidebar_region"] = region_rect(ui) if ui is not None else None
-    entry["sidebar_shown"] = bool(STATE["area"] and STATE["area"].spaces.active.show_region_ui)
-    entry.update(state)
-    REPORT["steps"].append(entry)
-    log(f"step {number} {name}: {shot}")
-
-
-# --- waiting ------------------------------------------------------------------------------
-
-def until(name, condition):
-    """Yielded by the scenario: resume once ``condition()`` is true."""
-    return name, condition
-
-
-def fresh_draws(count=2):
-    """A condition: the viewport drew ``count`` more complete frames from now on."""
-    mark = STATE["draws"]
-
-    def drawn():
-        if STATE["draws"] - mark >= count:
-            return True
-        STATE["area"].tag_redraw()
-        return False
-    return until(f"{count} viewport draws", drawn)
-
-
-def pause(seconds):
-    end = time.monotonic() + seconds
-    return until(f"{seconds} s pause", lambda: time.monotonic() >= end)
+def file_browser():
+    return window_with('FILE_BROWSER')
 
 
 # --- the user's session -------------------------------------------------------------------
@@ -704,72 +543,14 @@ def _file_direction():
     return direction
 
 
-FIRST_PERSON = {"running": False, "invoked": 0}
+def error_state():
+    return {"camera": str(bpy.context.scene.camera), "draws": STATE["draws"],
+            "engine": bpy.context.scene.render.engine,
+            "scenes": [sc.name for sc in bpy.data.scenes],
+            "window_scene": STATE["window"].scene.name,
+            "shading": STATE["area"].spaces.active.shading.type,
+            "registered": hasattr(bpy.types, "CSM_PT_view_3d_light")}
 
 
-def watch_first_person():
-    """Wrap the first-person operator's start and end, so the driver knows when a key
-    press started it and when Esc ended it (Blender 3.4 lists no running modal operators)."""
-    from csm_engine.blender import operators
-    cls = operators.CSM_OT_first_person
-    original_invoke, original_finish = cls.invoke, cls._finish
-
-    def invoke(self, context, event):
-        result = original_invoke(self, context, event)
-        if 'RUNNING_MODAL' in result:
-            FIRST_PERSON["running"] = True
-            FIRST_PERSON["invoked"] += 1
-        return result
-
-    def _finish(self, context):
-        FIRST_PERSON["running"] = False
-        return original_finish(self, context)
-
-    cls.invoke, cls._finish = invoke, _finish
-
-
-def _header_shown(area):
-    return FIRST_PERSON["running"]
-
-
-SCENARIO = scenario()
-
-
-def tick():
-    try:
-        if STATE["draw_error"]:
-            raise RuntimeError("the CSM viewport draw failed:\n" + STATE["draw_error"])
-        now = time.monotonic()
-        if now - STATE["started"] > TOTAL_LIMIT_S:
-            raise RuntimeError(f"gave up after {TOTAL_LIMIT_S} s")
-        if STATE["condition"] is not None:
-            if not STATE["condition"]():
-                if now - STATE["condition_since"] > WAIT_LIMIT_S:
-                    raise RuntimeError(f"waited {WAIT_LIMIT_S} s for: {STATE['condition_name']}")
-                return TICK_S
-        try:
-            name, condition = next(SCENARIO)
-        except StopIteration:
-            finish(0)
-            return None
-        STATE.update(condition=condition, condition_name=name, condition_since=now)
-        return TICK_S
-    except Exception:
-        REPORT["error"] = traceback.format_exc()
-        print(REPORT["error"], file=sys.stderr, flush=True)
-        try:   # what the window showed when it went wrong, for the failure message
-            REPORT["error_screenshot"] = screenshot(0, "error")
-            REPORT["error_state"] = {"camera": str(bpy.context.scene.camera),
-                                     "draws": STATE["draws"],
-                                     "engine": bpy.context.scene.render.engine,
-                                     "scenes": [sc.name for sc in bpy.data.scenes],
-                                     "window_scene": STATE["window"].scene.name,
-                                     "shading": STATE["area"].spaces.active.shading.type,
-                                     "registered": hasattr(bpy.types, "CSM_PT_view_3d_light")}
-        except Exception:
-            pass
-        finish(1)
-
-
-os.makedirs(OUT_DIR, exist_ok=True)
-bpy.app.timers.register(tick, first_interval=0.5)
+start("gui_controls", OUT_DIR, "controls.json", "step")
+run(scenario(), error_state)

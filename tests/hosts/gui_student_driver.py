@@ -26,21 +26,22 @@ After each step it saves ``walk_<n>_<name>.png`` (the main window, or the Prefer
 window in step 1) and records the state in ``walk.json`` (``error`` None on success).
 """
 
-import json
 import os
-import subprocess
 import sys
-import time
-import traceback
 
 import bpy
+
+# The shared half of the drivers sits beside this file (Blender puts no script folder
+# on sys.path).
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from gui_common import (  # noqa: E402 (after the path entry)
+    FIRST_PERSON, STATE, click_in, count_view_draws, fresh_draws, mouse_to_viewport, pause,
+    record, run, screen_height, screen_top, screenshot, sidebar, start, until,
+    watch_first_person, window_with, xdotool)
 
 ARGS = sys.argv[sys.argv.index("--") + 1:]
 OUT_DIR, ADDON_ZIP, SHADER_COPY = (os.path.abspath(a) for a in ARGS[:3])
 
-TICK_S = 0.05
-WAIT_LIMIT_S = 30.0
-TOTAL_LIMIT_S = 150.0
 HOLD_W_S = 0.5
 BLEND_BAND_M = 20
 # Where things are drawn in the fixed 1600x900 window at the default UI scale (measured on
@@ -66,119 +67,6 @@ DEBUG_VIEW_FROM_BOTTOM_PX = 324   # bottom-left corner with the sidebar scrolled
 # The final colour's tint written into the copy's lighting_frag.glsl in step 7.
 TINT = "vec3(1.0, 0.45, 0.45)"
 
-sys.dont_write_bytecode = True
-STATE = {"started": time.monotonic(), "draws": 0, "draw_error": None, "condition": None,
-         "condition_name": "", "condition_since": 0.0}
-REPORT = {"error": None, "blender": bpy.app.version_string, "steps": []}
-FIRST_PERSON = {"running": False, "invoked": 0}
-
-
-def log(message):
-    print(f"gui_student: {time.monotonic() - STATE['started']:6.2f} s: {message}", flush=True)
-
-
-def finish(exit_code):
-    REPORT["seconds"] = round(time.monotonic() - STATE["started"], 3)
-    with open(os.path.join(OUT_DIR, "walk.json"), "w") as handle:
-        json.dump(REPORT, handle, indent=2)
-    log(f"done, exit code {exit_code}")
-    sys.stdout.flush()
-    os._exit(exit_code)
-
-
-def xdotool(*args):
-    subprocess.run(["xdotool", *[str(a) for a in args]], check=True, timeout=10,
-                   stdin=subprocess.DEVNULL)
-
-
-def until(name, condition):
-    return name, condition
-
-
-def pause(seconds):
-    end = time.monotonic() + seconds
-    return until(f"{seconds} s pause", lambda: time.monotonic() >= end)
-
-
-def fresh_draws(count=2):
-    mark = STATE["draws"]
-
-    def drawn():
-        if STATE["draws"] - mark >= count:
-            return True
-        STATE["area"].tag_redraw()
-        return False
-    return until(f"{count} viewport draws", drawn)
-
-
-def screen_height():
-    if "screen_height" not in STATE:
-        size = subprocess.run(["xdotool", "getdisplaygeometry"], check=True, timeout=10,
-                              capture_output=True, text=True, stdin=subprocess.DEVNULL)
-        STATE["screen_height"] = int(size.stdout.split()[1])
-    return STATE["screen_height"]
-
-
-def screen_top(window, region):
-    return screen_height() - window.y - (region.y + region.height)
-
-
-def click_in(window, region, x, y):
-    xdotool("mousemove", window.x + region.x + x, screen_top(window, region) + y)
-    yield pause(0.2)
-    xdotool("click", "1")
-
-
-def region_rect(region):
-    return {"x": region.x, "y": region.y, "width": region.width, "height": region.height}
-
-
-def sidebar(area):
-    return next((r for r in area.regions if r.type == 'UI'), None)
-
-
-def mouse_to_viewport():
-    window, area, region = STATE["window"], STATE["area"], STATE["region"]
-    ui = sidebar(area)
-    right = ui.x if ui is not None and area.spaces.active.show_region_ui \
-        else region.x + region.width
-    x, y = window.x + (region.x + right) // 2, screen_top(window, region) + region.height // 2
-    xdotool("mousemove", x, y)
-    return x, y
-
-
-def window_with(area_type):
-    for window in bpy.context.window_manager.windows:
-        for area in window.screen.areas:
-            if area.type == area_type:
-                return window, area
-    return None
-
-
-def screenshot(number, name, window=None, area=None):
-    if window is None:
-        window, area, region = STATE["window"], STATE["area"], STATE["region"]
-    else:
-        region = next(r for r in area.regions if r.type == 'WINDOW')
-    path = os.path.join(OUT_DIR, f"walk_{number}_{name}.png")
-    with bpy.context.temp_override(window=window, area=area, region=region):
-        bpy.ops.screen.screenshot(filepath=path, check_existing=False)
-    return os.path.basename(path)
-
-
-def record(number, name, shot, **state):
-    entry = {"number": number, "name": name, "screenshot": shot,
-             "seconds": round(time.monotonic() - STATE["started"], 3)}
-    area = STATE.get("area")
-    if area is not None:
-        entry["viewport_region"] = region_rect(STATE["region"])
-        ui = sidebar(area)
-        entry["sidebar_region"] = region_rect(ui) if area.spaces.active.show_region_ui else None
-    entry.update(state)
-    REPORT["steps"].append(entry)
-    log(f"step {number} {name}: {shot}")
-
-
 def camera_matrix():
     return [[float(v) for v in row] for row in bpy.context.scene.camera.matrix_world]
 
@@ -199,36 +87,6 @@ def type_path_in_file_browser(path):
     yield until(f"the path typed in the file browser selected {os.path.basename(path)}",
                 lambda: browser_area.spaces.active.params.filename == os.path.basename(path))
     yield pause(0.3)
-
-
-def watch_engine():
-    """Count the viewport's finished frames, and see first person start and end."""
-    from csm_engine.blender import engine, operators
-    original_draw = engine.CSMRenderEngine.view_draw
-
-    def view_draw(self, context, depsgraph):
-        try:
-            original_draw(self, context, depsgraph)
-        except Exception:
-            STATE["draw_error"] = traceback.format_exc()
-            raise
-        STATE["draws"] += 1
-    engine.CSMRenderEngine.view_draw = view_draw
-
-    cls = operators.CSM_OT_first_person
-    original_invoke, original_finish = cls.invoke, cls._finish
-
-    def invoke(self, context, event):
-        result = original_invoke(self, context, event)
-        if 'RUNNING_MODAL' in result:
-            FIRST_PERSON["running"] = True
-            FIRST_PERSON["invoked"] += 1
-        return result
-
-    def _finish(self, context):
-        FIRST_PERSON["running"] = False
-        return original_finish(self, context)
-    cls.invoke, cls._finish = invoke, _finish
 
 
 def sidebar_middle(window, ui):
@@ -304,7 +162,8 @@ def walk():
         bpy.ops.wm.window_close()
     yield until("the Preferences window closed", lambda: window_with('PREFERENCES') is None)
     import csm_engine
-    watch_engine()
+    count_view_draws()
+    watch_first_person()
     record(1, "installed", shot, addon_file=csm_engine.__file__,
            addon_search=bpy.context.window_manager.addon_search)
 
@@ -487,36 +346,5 @@ def walk():
            folder_in_use=shaders.LIBRARY.folder_in_use, shader_error=shaders.LIBRARY.last_error)
 
 
-SCENARIO = walk()
-
-
-def tick():
-    try:
-        if STATE["draw_error"]:
-            raise RuntimeError("the CSM viewport draw failed:\n" + STATE["draw_error"])
-        now = time.monotonic()
-        if now - STATE["started"] > TOTAL_LIMIT_S:
-            raise RuntimeError(f"gave up after {TOTAL_LIMIT_S} s")
-        if STATE["condition"] is not None and not STATE["condition"]():
-            if now - STATE["condition_since"] > WAIT_LIMIT_S:
-                raise RuntimeError(f"waited {WAIT_LIMIT_S} s for: {STATE['condition_name']}")
-            return TICK_S
-        try:
-            name, condition = next(SCENARIO)
-        except StopIteration:
-            finish(0)
-            return None
-        STATE.update(condition=condition, condition_name=name, condition_since=now)
-        return TICK_S
-    except Exception:
-        REPORT["error"] = traceback.format_exc()
-        print(REPORT["error"], file=sys.stderr, flush=True)
-        try:
-            REPORT["error_screenshot"] = screenshot(0, "error")
-        except Exception:
-            pass
-        finish(1)
-
-
-os.makedirs(OUT_DIR, exist_ok=True)
-bpy.app.timers.register(tick, first_interval=0.5)
+start("gui_student", OUT_DIR, "walk.json", "walk")
+run(walk())

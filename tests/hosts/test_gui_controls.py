@@ -15,19 +15,16 @@ and Blender, then checks the records and the screenshots' pixels.
 ``docs/images/gui_step_*.png``.
 """
 
-import json
 import os
 import shutil
-import subprocess
 import zipfile
 
 import numpy as np
 import pytest
 
-from tests.hosts.test_gui_viewport import (  # the same X server and Blender set-up
-    SCREEN_SIZE, _blender_env, _fail, _save_preferences_without_splash,
-    load_png, x_display)
-from tests.hosts.test_gui_student_walk import save_for_docs
+from tests.hosts.gui_host import (  # the X server and Blender set-up
+    blender_env, fail as _fail, load_png, run_driver, save_for_docs,
+    save_preferences_without_splash, x_display)
 from tests.hosts.test_packaging import _manifest, _run_build
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
@@ -48,8 +45,8 @@ def run(x_display, hosts, tmp_path_factory):
     root = tmp_path_factory.mktemp("gui_controls")
     out_dir = root / "out"
     out_dir.mkdir()
-    env = _blender_env(hosts, root, x_display)
-    _save_preferences_without_splash(blender, env, str(root))
+    env = blender_env(hosts, root, x_display)
+    save_preferences_without_splash(blender, env, str(root))
     # Installed, not enabled: the driver enables it in Preferences > Add-ons with clicks.
     dist = root / "dist"
     built = _run_build(REPO, str(dist))
@@ -58,24 +55,8 @@ def run(x_display, hosts, tmp_path_factory):
     addons = os.path.join(env["BLENDER_USER_SCRIPTS"], "addons")
     with zipfile.ZipFile(legacy) as archive:
         archive.extractall(addons)
-    width, height = SCREEN_SIZE
-    command = [blender, "--window-geometry", "0", "0", str(width), str(height),
-               "--no-window-focus", "--python", DRIVER, "--", str(out_dir)]
-    process = subprocess.Popen(command, env=env, cwd=str(root), stdin=subprocess.DEVNULL,
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        output, _ = process.communicate(timeout=BLENDER_TIMEOUT_S)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        output, _ = process.communicate()
-        _fail(f"Blender did not finish within {BLENDER_TIMEOUT_S} s:\n{output[-4000:]}")
-    report_path = out_dir / "controls.json"
-    if not report_path.is_file():
-        _fail(f"the driver wrote no report (exit code {process.returncode}):\n{output[-4000:]}")
-    report = json.loads(report_path.read_text())
-    if report["error"] or process.returncode != 0:
-        _fail(f"the driver failed (exit code {process.returncode}):\n"
-              f"{report['error'] or output[-4000:]}\nimages in {out_dir}")
+    report, output, _ = run_driver(blender, DRIVER, [out_dir], env, root,
+                                   "controls.json", BLENDER_TIMEOUT_S)
     steps = {step["name"]: step for step in report["steps"]}
     if os.environ.get("CSM_UPDATE_DOCS") == "1":
         # The screenshots docs/pictures.md shows, the in-between ones (menus, Preferences,

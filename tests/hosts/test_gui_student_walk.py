@@ -10,17 +10,16 @@ step; this file starts the X server and Blender, then checks the records and the
 ``docs/images/walk_*.png``.
 """
 
-import json
 import os
 import shutil
-import subprocess
 
 import numpy as np
 import pytest
 
 from tests.conftest import REPO
-from tests.hosts.test_gui_viewport import (  # the same X server and Blender set-up
-    SCREEN_SIZE, _blender_env, _fail, _save_preferences_without_splash, load_png, x_display)
+from tests.hosts.gui_host import (  # the X server and Blender set-up
+    blender_env, fail as _fail, load_png, run_driver, save_for_docs,
+    save_preferences_without_splash, x_display)
 from tests.hosts.test_packaging import _manifest, _run_build
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
@@ -28,7 +27,6 @@ pytestmark = [pytest.mark.gui, pytest.mark.slow]
 DRIVER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "gui_student_driver.py")
 DOCS_IMAGES = os.path.join(REPO, "docs", "images")
 BLENDER_TIMEOUT_S = 200      # the driver gives up after 150 s
-DOCS_WIDTH_PX = 1200         # screenshots in docs/ are scaled to this width
 _ = x_display
 
 
@@ -40,8 +38,8 @@ def walk(x_display, hosts, tmp_path_factory):
     root = tmp_path_factory.mktemp("gui_walk")
     out_dir = root / "out"
     out_dir.mkdir()
-    env = _blender_env(hosts, root, x_display)
-    _save_preferences_without_splash(blender, env, str(root))
+    env = blender_env(hosts, root, x_display)
+    save_preferences_without_splash(blender, env, str(root))
     dist = root / "dist"
     built = _run_build(REPO, str(dist))
     assert built.returncode == 0, f"tools/build.py failed:\n{built.stdout}{built.stderr}"
@@ -49,39 +47,12 @@ def walk(x_display, hosts, tmp_path_factory):
     # The student's copy of the shaders (as in their checkout), for the Shader Folder.
     shader_copy = root / "my_shaders"
     shutil.copytree(os.path.join(REPO, "shaders"), shader_copy)
-    width, height = SCREEN_SIZE
-    command = [blender, "--window-geometry", "0", "0", str(width), str(height),
-               "--no-window-focus", "--python", DRIVER, "--", str(out_dir), str(legacy),
-               str(shader_copy)]
-    process = subprocess.Popen(command, env=env, cwd=str(root), stdin=subprocess.DEVNULL,
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        output, _ = process.communicate(timeout=BLENDER_TIMEOUT_S)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        output, _ = process.communicate()
-        _fail(f"Blender did not finish within {BLENDER_TIMEOUT_S} s:\n{output[-4000:]}")
-    report_path = out_dir / "walk.json"
-    if not report_path.is_file():
-        _fail(f"the driver wrote no report (exit code {process.returncode}):\n{output[-4000:]}")
-    report = json.loads(report_path.read_text())
-    if report["error"] or process.returncode != 0:
-        _fail(f"the driver failed (exit code {process.returncode}):\n"
-              f"{report['error'] or output[-4000:]}\nimages in {out_dir}")
+    report, output, _ = run_driver(blender, DRIVER, [out_dir, legacy, shader_copy], env, root,
+                                   "walk.json", BLENDER_TIMEOUT_S)
     if os.environ.get("CSM_UPDATE_DOCS") == "1":
         _update_docs(out_dir, report)
     return {"report": report, "steps": {s["name"]: s for s in report["steps"]},
             "dir": out_dir, "shader_copy": str(shader_copy), "env": env}
-
-
-def save_for_docs(source, target):
-    """A screenshot as docs/ keeps it: at most DOCS_WIDTH_PX wide, 256 colours without
-    dithering (flat UI colours stay flat), under 200 KB."""
-    done = subprocess.run(["convert", str(source), "-resize", f"{DOCS_WIDTH_PX}x>", "-strip",
-                           "+dither", "-colors", "256", str(target)],
-                          capture_output=True, text=True)
-    assert done.returncode == 0, f"ImageMagick convert failed: {done.stderr}"
-    assert os.path.getsize(target) < 200_000, (target, os.path.getsize(target))
 
 
 def _update_docs(out_dir, report):

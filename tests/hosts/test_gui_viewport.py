@@ -10,12 +10,8 @@ and Blender, then compares pixels.
 ``docs/images/viewport_blender34.png``.
 """
 
-import json
 import os
-import select
 import shutil
-import subprocess
-import time
 
 import numpy as np
 import pytest
@@ -23,9 +19,12 @@ import pytest
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
 
 from tests.conftest import REPO
+from tests.hosts.gui_host import (  # noqa: F401 (x_display: a fixture used by name)
+    SCREEN_SIZE, blender_env, load_png, run_driver, save_preferences_without_splash,
+    x_display)
+
 DRIVER = os.path.join(os.path.dirname(os.path.abspath(__file__)), "gui_driver.py")
 DOCS_SCREENSHOT = os.path.join(REPO, "docs", "images", "viewport_blender34.png")
-SCREEN_SIZE = (1600, 900)
 BLENDER_TIMEOUT_S = 120
 
 # How close the viewport's camera frame must be to the F12 render (RGB in 0..1).
@@ -45,71 +44,6 @@ MAX_FRACTION_OFF = 0.02
 SHADOW_STEP = 0.05            # darker than the shadowless render by this much: in shadow
 SUNLIT_TOLERANCE = 0.02       # as bright as the shadowless render: in sunlight
 LIT = 0.15
-
-
-def _fail(message):
-    pytest.fail(message, pytrace=False)
-
-
-# --- processes ----------------------------------------------------------------------------
-
-@pytest.fixture(scope="module")
-def x_display():
-    """A fresh Xvfb on a display number the server picks itself (-displayfd): no guessing,
-    no clash with a display in use, and no sleep: the number arrives once it accepts clients."""
-    xvfb = shutil.which("Xvfb")
-    if xvfb is None:
-        _fail("Xvfb not found: apt-get install xvfb")
-    read_end, write_end = os.pipe()
-    width, height = SCREEN_SIZE
-    server = subprocess.Popen(
-        [xvfb, "-displayfd", str(write_end), "-screen", "0", f"{width}x{height}x24",
-         "-nolisten", "tcp", "-noreset"],
-        pass_fds=[write_end], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE)
-    os.close(write_end)
-    number = b""
-    deadline = time.monotonic() + 30
-    while not number.endswith(b"\n") and time.monotonic() < deadline:
-        ready, _, _ = select.select([read_end], [], [], 0.5)
-        if ready:
-            chunk = os.read(read_end, 64)
-            if not chunk:
-                break
-            number += chunk
-    os.close(read_end)
-    if not number.strip().isdigit():
-        server.kill()
-        _fail(f"Xvfb did not start: {server.communicate()[1].decode(errors='replace')[-2000:]}")
-    try:
-        yield ":" + number.strip().decode()
-    finally:
-        server.terminate()
-        try:
-            server.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            server.kill()
-            server.wait()
-
-
-def _blender_env(hosts, root, display):
-    env = hosts.user_dirs_env(str(root))
-    env["DISPLAY"] = display
-    return env
-
-
-def _save_preferences_without_splash(blender, env, cwd):
-    """The splash screen covers the middle of the window; a throwaway userpref.blend turns it
-    off before the GUI starts (it is read only at start-up)."""
-    script = ("import bpy; bpy.context.preferences.view.show_splash = False; "
-              "bpy.ops.wm.save_userpref()")
-    done = subprocess.run([blender, "-b", "--factory-startup", "--python-exit-code", "1",
-                           "--python-expr", script], env=env, cwd=cwd, capture_output=True,
-                          text=True, stdin=subprocess.DEVNULL, timeout=BLENDER_TIMEOUT_S)
-    prefs = os.path.join(env["BLENDER_USER_CONFIG"], "userpref.blend")
-    if done.returncode != 0 or not os.path.isfile(prefs):
-        _fail(f"could not save Blender preferences without the splash screen:\n"
-              f"{(done.stdout + done.stderr)[-3000:]}")
 
 
 class ViewportRun:
@@ -132,41 +66,15 @@ def viewport_run(x_display, hosts, tmp_path_factory):
     root = tmp_path_factory.mktemp("gui_viewport")
     out_dir = root / "out"
     out_dir.mkdir()
-    env = _blender_env(hosts, root, x_display)
-    _save_preferences_without_splash(blender, env, str(root))
+    env = blender_env(hosts, root, x_display)
+    save_preferences_without_splash(blender, env, str(root))
 
-    width, height = SCREEN_SIZE
-    command = [blender, "--window-geometry", "0", "0", str(width), str(height),
-               "--no-window-focus", "--python", DRIVER, "--", str(out_dir)]
-    started = time.monotonic()
-    process = subprocess.Popen(command, env=env, cwd=str(root), stdin=subprocess.DEVNULL,
-                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        output, _ = process.communicate(timeout=BLENDER_TIMEOUT_S)
-    except subprocess.TimeoutExpired:
-        process.kill()
-        output, _ = process.communicate()
-        _fail(f"Blender did not finish within {BLENDER_TIMEOUT_S} s:\n{output[-4000:]}")
-    seconds = time.monotonic() - started
-
-    report_path = out_dir / "viewport.json"
-    if not report_path.is_file():
-        _fail(f"the driver wrote no report (exit code {process.returncode}):\n{output[-4000:]}")
-    report = json.loads(report_path.read_text())
-    if report["error"] or process.returncode != 0:
-        _fail(f"the driver failed (exit code {process.returncode}):\n"
-              f"{report['error'] or output[-4000:]}")
+    report, output, seconds = run_driver(blender, DRIVER, [out_dir], env, root,
+                                         "viewport.json", BLENDER_TIMEOUT_S)
     return ViewportRun(str(out_dir), report, output, seconds)
 
 
 # --- pixels -------------------------------------------------------------------------------
-
-def load_png(path):
-    """PNG -> float32 (height, width, 3) in 0..1, top row first, decoded by pip bpy's image
-    loader (a decoder independent of the Blender that wrote the file)."""
-    from tests.bpy.bpy_helpers import load_png as load_with_blender
-    return load_with_blender(path)[..., :3]
-
 
 def camera_frame_crop(window_image, frame, size):
     """Sample ``window_image`` inside ``frame`` (window pixels, bottom-left origin, edges as
