@@ -73,3 +73,44 @@ def load_png(path):
     finally:
         bpy.data.images.remove(image)
     return pixels.reshape(height, width, channels)[::-1]   # Blender's rows run bottom-up
+
+
+class RecordingLayout:
+    """Stands in for bpy.types.UILayout (which needs a window): records the labels,
+    properties and operators a panel's draw() puts in it."""
+
+    def __init__(self, root=None):
+        self.root = root or self
+        if root is None:
+            self.labels, self.props, self.operators = [], [], []
+
+    def _child(self, *args, **kwargs):
+        return RecordingLayout(self.root)
+    column = row = box = split = _child
+
+    def separator(self, *args, **kwargs):
+        pass
+
+    def label(self, text="", **kwargs):
+        self.root.labels.append(text)
+
+    def prop(self, data, name, **kwargs):
+        assert name in data.bl_rna.properties, name
+        self.root.props.append(name)
+
+    def operator(self, idname, **kwargs):
+        self.root.operators.append(idname)
+
+
+def pipeline_drawing(plan):
+    """A new pipeline (its own textures, records and planning state) that draws ``plan``
+    instead of planning. It is the reference for a kept frame: the same cascades drawn
+    with nothing kept, whatever the planner carried over from the views the kept frame's
+    pipeline drew before (a new view's plan may differ)."""
+    from csm_engine.render import pipeline
+
+    class DrawsWithPlan(pipeline.Pipeline):
+        def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False):
+            return plan
+
+    return DrawsWithPlan()

@@ -18,7 +18,7 @@ import bpy
 import numpy as np
 import pytest
 
-from tests.bpy.bpy_helpers import load_png, render_scene
+from tests.bpy.bpy_helpers import RecordingLayout, load_png, render_scene
 from tests.conftest import REPO
 from csm_engine.blender import keymap, light_controls, operators, ui
 from csm_engine.core import controls, paths
@@ -160,7 +160,7 @@ def test_controls_without_a_sun_show_a_message_and_do_nothing(empty_scene):
     light.sun_azimuth = 45.0
     assert tuple(light.sun_direction) == (0.0, 0.0, -1.0)
     assert not bpy.ops.csm.reset_sun_direction.poll()
-    layout = _Layout()
+    layout = RecordingLayout()
     ui.draw_light(layout, bpy.context)
     assert any("No Sun" in text for text in layout.labels)
 
@@ -255,7 +255,7 @@ def test_shader_reload_keeps_the_last_good_shaders_and_picks_up_the_fix(
     match = re.search(r"lighting_frag\.glsl:(\d+)", message)
     assert match and int(match.group(1)) == broken_line, message
     assert library.last_error and "lighting_frag.glsl" in library.last_error
-    layout = _Layout()
+    layout = RecordingLayout()
     ui.draw_scene(layout, bpy.context)          # the Scene panel shows the error
     assert any("lighting_frag.glsl" in text for text in layout.labels), layout.labels
     still = render_scene(empty_scene, 48, 32)["combined"]
@@ -272,7 +272,7 @@ def test_shader_reload_keeps_the_last_good_shaders_and_picks_up_the_fix(
     lit = before[..., :3].sum(axis=-1) > 0.2
     assert lit.any()
     np.testing.assert_allclose(after[..., :3][lit], before[..., :3][lit] * 0.5, atol=0.02)
-    layout = _Layout()
+    layout = RecordingLayout()
     ui.draw_scene(layout, bpy.context)
     assert not any("error" in text.lower() for text in layout.labels)
 
@@ -308,32 +308,6 @@ def test_screenshot_without_a_camera_reports_an_error(empty_scene, tmp_path):
 
 
 # ------------------------------------------------------------------------ panels
-class _Layout:
-    """Stands in for bpy.types.UILayout (which needs a window): records what is drawn."""
-
-    def __init__(self, root=None):
-        self.root = root or self
-        if root is None:
-            self.labels, self.props, self.operators = [], [], []
-
-    def _child(self, *args, **kwargs):
-        return _Layout(self.root)
-    column = row = box = split = _child
-
-    def separator(self, *args, **kwargs):
-        pass
-
-    def label(self, text="", **kwargs):
-        self.root.labels.append(text)
-
-    def prop(self, data, name, **kwargs):
-        assert name in data.bl_rna.properties, name
-        self.root.props.append(name)
-
-    def operator(self, idname, **kwargs):
-        self.root.operators.append(idname)
-
-
 def test_light_and_scene_groups_are_in_both_panels(empty_scene):
     keys = [key for key, _label, _draw in ui.GROUPS]
     assert keys == ["cascades", "filtering", "bias", "occluders", "light", "antialiasing",
@@ -343,11 +317,11 @@ def test_light_and_scene_groups_are_in_both_panels(empty_scene):
             assert hasattr(bpy.types, f"CSM_PT_{space}_{key}"), (space, key)
     assert bpy.types.CSM_PT_view_3d_light.bl_category == "CSM"
     _lit_plane(empty_scene)
-    layout = _Layout()
+    layout = RecordingLayout()
     ui.draw_light(layout, bpy.context)
     assert {"sun_azimuth", "sun_elevation", "sun_direction"} <= set(layout.props)
     assert "csm.reset_sun_direction" in layout.operators
-    layout = _Layout()
+    layout = RecordingLayout()
     ui.draw_scene(layout, bpy.context)
     assert {"csm.import_scene", "csm.reload_scene", "csm.reload_shaders",
             "csm.screenshot", "csm.first_person"} <= set(layout.operators)
@@ -380,7 +354,7 @@ def test_object_panel_shows_the_shadow_terminator_offset_csm_reads(empty_scene):
     sphere = bpy.context.object
     panel = bpy.types.CSM_PT_object_shadow_terminator
     assert panel.poll(bpy.context)
-    layout = _Layout()
+    layout = RecordingLayout()
     ui.draw_shadow_terminator(layout, bpy.context)
     assert layout.props == ["shadow_terminator_geometry_offset"]
     owner = compat.terminator_offset_owner(sphere)

@@ -17,7 +17,7 @@ import bpy
 import numpy as np
 import pytest
 
-from tests.bpy.bpy_helpers import cube_on_plane, render_scene
+from tests.bpy.bpy_helpers import RecordingLayout, cube_on_plane, render_scene
 from csm_engine.blender import operators, preferences
 from csm_engine.core import paths
 from csm_engine.render import shaders
@@ -26,29 +26,6 @@ SIZE = (64, 48)
 # What the edit turns every lit pixel into (linear RGB; the Standard view shows it as is).
 MAGENTA = (1.0, 0.0, 1.0)
 LIT_LINE = "  out_color = vec4(color, 1.0);"
-
-
-class Layout:
-    """Stands in for bpy.types.UILayout (which needs a window): records what is drawn."""
-
-    def __init__(self, root=None):
-        self.root = root or self
-        if root is None:
-            self.labels, self.props, self.operators = [], [], []
-
-    def _child(self, *args, **kwargs):
-        return Layout(self.root)
-    column = row = box = split = _child
-
-    def label(self, text="", **kwargs):
-        self.root.labels.append(text)
-
-    def prop(self, data, name, **kwargs):
-        assert name in data.bl_rna.properties, name
-        self.root.props.append(name)
-
-    def operator(self, idname, **kwargs):
-        self.root.operators.append(idname)
 
 
 def magenta_share(image):
@@ -99,7 +76,7 @@ def test_the_preference_is_filed_under_the_addon_module_name():
     # Empty means the add-on's own, and the panel says so.
     assert preferences.chosen_shader_folder() == ""
     assert shaders.LIBRARY.folder == paths.shaders_dir()
-    layout = Layout()
+    layout = RecordingLayout()
     preferences.draw_shader_folder(layout, bpy.context)
     assert layout.labels == ["Shaders: add-on's own"], layout.labels
     assert layout.operators == ["csm.open_shader_folder"]
@@ -112,13 +89,13 @@ def test_f5_reads_the_shader_folder_and_shows_the_edit(lit_scene, shader_folder,
     shutil.copytree(paths.shaders_dir(), checkout)
     shader_folder(checkout)
     assert shaders.LIBRARY.folder == str(checkout)
-    layout = Layout()
+    layout = RecordingLayout()
     preferences.draw_shader_folder(layout, bpy.context)   # not loaded yet: F5 loads it
     assert layout.labels == ["Shaders: add-on's own", "Shader Folder set: F5 loads it"]
 
     assert reload_shaders() == {'FINISHED'}
     assert shaders.LIBRARY.folder_in_use == str(checkout)
-    layout = Layout()
+    layout = RecordingLayout()
     preferences.draw_shader_folder(layout, bpy.context)
     shown = paths.display_path(str(checkout), max_chars=preferences.SHOWN_PATH_CHARS)
     assert layout.labels == ["Shaders from:", shown], layout.labels
@@ -158,7 +135,7 @@ def test_a_folder_without_the_library_is_one_line_and_the_last_shaders_keep_runn
         still = render_scene(lit_scene, *SIZE)["combined"]
         np.testing.assert_array_equal(still, before)
     assert "more files" in shaders.folder_problem(str(empty))   # a long list is cut short
-    layout = Layout()
+    layout = RecordingLayout()
     preferences.draw_shader_folder(layout, bpy.context)   # the error box shows why instead
     assert layout.labels == ["Shaders: add-on's own"], layout.labels
 

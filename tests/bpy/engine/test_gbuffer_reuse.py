@@ -14,23 +14,10 @@ import pytest
 
 from csm_engine.blender import engine
 from csm_engine.render import pipeline
-from tests.bpy.bpy_helpers import cube_on_plane, render_result, viewport_frame
+from tests.bpy.bpy_helpers import (
+    cube_on_plane, pipeline_drawing, render_result, viewport_frame)
 
 W, H = 96, 64
-
-
-class _DrawsWithPlan(pipeline.Pipeline):
-    """A new pipeline (its own textures, records and planning state) that draws ``plan``
-    instead of planning. It is the reference for a kept frame: the same cascades drawn
-    with nothing kept, whatever the planner carried over from the views the kept frame's
-    pipeline drew before (a new view's plan may differ)."""
-
-    def __init__(self, plan):
-        super().__init__()
-        self.plan = plan
-
-    def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False):
-        return self.plan
 
 
 def _scene(empty_scene):
@@ -233,7 +220,7 @@ def test_viewport_keeps_the_gbuffer_while_shadows_are_tuned(empty_scene):
     renderer = pipeline.Pipeline()
     try:
         def fresh():
-            return _viewport_frame(scene, _DrawsWithPlan(renderer.last_plan),
+            return _viewport_frame(scene, pipeline_drawing(renderer.last_plan),
                                    mesh_cache.MeshCache())
 
         _viewport_frame(scene, renderer, cache)

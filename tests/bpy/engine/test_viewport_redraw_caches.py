@@ -12,23 +12,9 @@ import numpy as np
 
 from csm_engine.blender import engine, mesh_cache
 from csm_engine.render import pipeline
-from tests.bpy.bpy_helpers import render_scene, viewport_frame
+from tests.bpy.bpy_helpers import pipeline_drawing, render_scene, viewport_frame
 
 W, H = 96, 64
-
-
-class _DrawsWithPlan(pipeline.Pipeline):
-    """A new pipeline (its own textures, records and planning state) that draws ``plan``
-    instead of planning. It is the reference for a kept frame: the same cascades drawn
-    with nothing kept, whatever the planner carried over from the views the kept frame's
-    pipeline drew before (a new view's plan may differ)."""
-
-    def __init__(self, plan):
-        super().__init__()
-        self.plan = plan
-
-    def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False):
-        return self.plan
 
 
 def _scene(empty_scene):
@@ -95,7 +81,7 @@ def test_every_edit_shows_in_the_next_redraw(empty_scene):
             change()
             bpy.context.view_layer.update()
             kept = _frame(scene, view.pipeline, view.cache)
-            fresh = _frame(scene, _DrawsWithPlan(view.pipeline.last_plan),
+            fresh = _frame(scene, pipeline_drawing(view.pipeline.last_plan),
                            mesh_cache.MeshCache())
             assert np.abs(kept - fresh).max() < 1e-5, f"{name}: the kept frame is stale"
             assert np.abs(kept - before).max() > 1e-3, f"{name}: the edit does not show"
