@@ -2,15 +2,15 @@
 
 Owns the user's view of the sun: which Sun object is the scene's active sun
 (``sun_object``: the one the user picked, else the newest CSM import's, never one in an
-excluded or hidden collection); azimuth/elevation in degrees and a direction vector, all
-read from and written to that Sun's rotation, so the viewport and the Sun gizmo update
-together through the depsgraph; "Reset to scene file", which puts back the direction the
+excluded or hidden collection); azimuth/elevation as Blender angles (radians, shown in
+degrees) and a direction vector, all read from and written to that Sun's rotation, so the
+viewport and the Sun gizmo update together through the depsgraph; "Reset to scene file", which puts back the direction the
 import stored in the collection property ``csm_sun_direction``; and the first-person
 camera's speed (metres per second) and turn rate (an angle per second).
 
 Conventions (Z-up, Blender world):
-- azimuth: degrees from +X toward +Y of the direction TOWARDS the sun (seen from above);
-- elevation: degrees above the horizon of the direction towards the sun (90 = overhead);
+- azimuth: angle from +X toward +Y of the direction TOWARDS the sun (seen from above);
+- elevation: angle above the horizon of the direction towards the sun (90° = overhead);
 - vector: the direction the light TRAVELS (the Sun's local -Z axis), as in the scene file.
 """
 
@@ -124,20 +124,24 @@ def _set_travel(self, value):
         set_sun_travel(obj, value)
 
 
+# Blender's angle properties hold radians and show degrees (with the scene's rotation
+# units); the core's sun math is in degrees.
 def _get_azimuth(self):
-    return azimuth_elevation_from_travel(_get_travel(self))[0]
+    return math.radians(azimuth_elevation_from_travel(_get_travel(self))[0])
 
 
 def _get_elevation(self):
-    return azimuth_elevation_from_travel(_get_travel(self))[1]
+    return math.radians(azimuth_elevation_from_travel(_get_travel(self))[1])
 
 
 def _set_azimuth(self, value):
-    _set_travel(self, travel_from_azimuth_elevation(value, _get_elevation(self)))
+    _set_travel(self, travel_from_azimuth_elevation(math.degrees(value),
+                                                    math.degrees(_get_elevation(self))))
 
 
 def _set_elevation(self, value):
-    _set_travel(self, travel_from_azimuth_elevation(_get_azimuth(self), value))
+    _set_travel(self, travel_from_azimuth_elevation(math.degrees(_get_azimuth(self)),
+                                                    math.degrees(value)))
 
 
 class CSMLightControls(bpy.types.PropertyGroup):
@@ -145,19 +149,19 @@ class CSMLightControls(bpy.types.PropertyGroup):
 
     sun_azimuth: FloatProperty(
         name="Sun Azimuth",
-        description="Compass direction towards the sun, in degrees from +X toward +Y "
-                    "(0 = sun in +X, 90 = sun in +Y). Rotates the scene's active Sun (the "
-                    "selected one, else the newest imported scene's)",
+        description="Compass direction towards the sun, an angle from +X toward +Y "
+                    "(0\u00b0 = sun in +X, 90\u00b0 = sun in +Y). Rotates the scene's active "
+                    "Sun (the selected one, else the newest imported scene's)",
         get=_get_azimuth, set=_set_azimuth,
-        soft_min=-180.0, soft_max=180.0, step=100, precision=1, unit='NONE',
-        options=set())
+        soft_min=-math.pi, soft_max=math.pi, step=100, precision=1,
+        subtype='ANGLE', unit='ROTATION', options=set())
     sun_elevation: FloatProperty(
         name="Sun Elevation",
-        description="Height of the sun above the horizon, in degrees (0 = grazing light, "
-                    "90 = straight overhead). Rotates the scene's active Sun",
+        description="Height of the sun above the horizon, an angle (0\u00b0 = grazing "
+                    "light, 90\u00b0 = straight overhead). Rotates the scene's active Sun",
         get=_get_elevation, set=_set_elevation,
-        min=-90.0, max=90.0, step=100, precision=1,
-        options=set())
+        min=-math.pi / 2, max=math.pi / 2, step=100, precision=1,
+        subtype='ANGLE', unit='ROTATION', options=set())
     sun_direction: FloatVectorProperty(
         name="Light Direction",
         description="Direction the sunlight travels (unit vector, world Z-up, as in the "

@@ -8,6 +8,7 @@ nothing. With Add, the Light panel edits the newest import's sun, never a sun th
 layer does not show.
 """
 
+import math
 import os
 from types import SimpleNamespace
 
@@ -208,10 +209,10 @@ def test_with_add_the_light_panel_edits_the_newest_imports_sun(startup_scene):
     newest = bpy.data.collections["shadow_test"]
     sun = light_controls.sun_object(scene)
     assert sun.name in newest.objects and len(_suns(scene)) == 2
-    scene.csm_light.sun_elevation = 25.0
+    scene.csm_light.sun_elevation = math.radians(25.0)
     older = next(obj for obj in _suns(scene) if obj != sun)
     assert older.name in bpy.data.collections["default"].objects
-    assert scene.csm_light.sun_elevation == pytest.approx(25.0)
+    assert scene.csm_light.sun_elevation == pytest.approx(math.radians(25.0))
     assert light_controls.sun_travel(older) != pytest.approx(light_controls.sun_travel(sun))
     # The user picks the older sun (it becomes the active object): the panel follows.
     bpy.context.view_layer.objects.active = older

@@ -67,8 +67,8 @@ def test_light_properties_have_tooltips_with_units():
             continue
         assert prop.description, prop.identifier
     props = light_controls.CSMLightControls.bl_rna.properties
-    assert "degrees" in props["sun_azimuth"].description
-    assert "degrees" in props["sun_elevation"].description
+    for name in ("sun_azimuth", "sun_elevation"):   # Blender's angles: shown in degrees
+        assert (props[name].subtype, props[name].unit) == ('ANGLE', 'ROTATION'), name
     assert "metres per second" in props["fly_speed"].description
     assert props["fly_speed"].unit == 'VELOCITY'
     assert "per second" in props["fly_turn_speed"].description
@@ -118,8 +118,9 @@ def test_automatic_speed_is_a_tenth_of_the_scene_diagonal_per_second(empty_scene
 def test_azimuth_elevation_and_vector_round_trip_through_the_sun(empty_scene):
     _plane, sun, _camera = _lit_plane(empty_scene)
     light = empty_scene.csm_light
-    light.sun_azimuth, light.sun_elevation = 30.0, 40.0
-    assert (light.sun_azimuth, light.sun_elevation) == (pytest.approx(30.0), pytest.approx(40.0))
+    light.sun_azimuth, light.sun_elevation = math.radians(30.0), math.radians(40.0)
+    assert (light.sun_azimuth, light.sun_elevation) == (pytest.approx(math.radians(30.0)),
+                                                        pytest.approx(math.radians(40.0)))
     bpy.context.view_layer.update()
     travel = -np.array(sun.matrix_world)[:3, 2]
     towards = [math.cos(math.radians(40)) * math.cos(math.radians(30)),
@@ -128,13 +129,13 @@ def test_azimuth_elevation_and_vector_round_trip_through_the_sun(empty_scene):
     np.testing.assert_allclose(travel, -np.array(towards), atol=1e-6)
     np.testing.assert_allclose(light.sun_direction, travel, atol=1e-6)
     light.sun_direction = (0.0, 0.0, -2.0)           # straight down, not normalized
-    assert light.sun_elevation == pytest.approx(90.0)
+    assert light.sun_elevation == pytest.approx(math.pi / 2)
     light.sun_direction = (-1.0, 0.0, 0.0)           # travels to -X: sun in +X on horizon
     assert (light.sun_azimuth, light.sun_elevation) == (pytest.approx(0.0, abs=1e-5),
                                                         pytest.approx(0.0, abs=1e-5))
     sun.location = (5.0, 6.0, 7.0)
-    light.sun_azimuth = -135.0
-    assert light.sun_azimuth == pytest.approx(-135.0)
+    light.sun_azimuth = math.radians(-135.0)
+    assert light.sun_azimuth == pytest.approx(math.radians(-135.0))
     assert tuple(sun.location) == pytest.approx((5.0, 6.0, 7.0))   # only rotation changes
 
 
@@ -143,21 +144,21 @@ def test_rotating_the_sun_object_shows_in_the_controls(empty_scene):
     sun.rotation_mode = 'XYZ'
     sun.rotation_euler = (0.0, 0.0, 0.0)      # Blender's default sun shines straight down
     bpy.context.view_layer.update()
-    assert empty_scene.csm_light.sun_elevation == pytest.approx(90.0)
+    assert empty_scene.csm_light.sun_elevation == pytest.approx(math.pi / 2)
 
 
 def test_editing_the_sun_direction_changes_the_rendered_picture(empty_scene):
     _lit_plane(empty_scene)
-    empty_scene.csm_light.sun_elevation = 80.0
+    empty_scene.csm_light.sun_elevation = math.radians(80.0)
     bright = render_scene(empty_scene, 48, 32)["combined"][..., :3].mean()
-    empty_scene.csm_light.sun_elevation = 15.0
+    empty_scene.csm_light.sun_elevation = math.radians(15.0)
     grazing = render_scene(empty_scene, 48, 32)["combined"][..., :3].mean()
     assert grazing < bright * 0.6
 
 
 def test_controls_without_a_sun_show_a_message_and_do_nothing(empty_scene):
     light = empty_scene.csm_light
-    light.sun_azimuth = 45.0
+    light.sun_azimuth = math.radians(45.0)
     assert tuple(light.sun_direction) == (0.0, 0.0, -1.0)
     assert not bpy.ops.csm.reset_sun_direction.poll()
     layout = RecordingLayout()
@@ -188,7 +189,7 @@ def test_reset_to_scene_file_restores_the_imported_direction(empty_scene, defaul
     file_travel = np.array(bpy.data.collections["default"]["csm_sun_direction"])
     travel, sun = _sun_travel(empty_scene)
     np.testing.assert_allclose(travel, file_travel / np.linalg.norm(file_travel), atol=1e-6)
-    empty_scene.csm_light.sun_elevation = 10.0
+    empty_scene.csm_light.sun_elevation = math.radians(10.0)
     assert not np.allclose(_sun_travel(empty_scene)[0], travel, atol=1e-3)
     assert bpy.ops.csm.reset_sun_direction() == {'FINISHED'}
     np.testing.assert_allclose(_sun_travel(empty_scene)[0], travel, atol=1e-6)
@@ -200,7 +201,7 @@ def test_reload_keeps_the_scene_on_a_broken_file_and_resets_the_light_when_fixed
         empty_scene, default_copy, monkeypatch):
     assert bpy.ops.csm.import_scene(filepath=str(default_copy)) == {'FINISHED'}
     light = empty_scene.csm_light
-    light.sun_azimuth, light.sun_elevation = 120.0, 20.0
+    light.sun_azimuth, light.sun_elevation = math.radians(120.0), math.radians(20.0)
     edited, sun = _sun_travel(empty_scene)
     objects_before = sorted(obj.name for obj in empty_scene.objects)
 

@@ -156,7 +156,8 @@ def test_sun_edit_reset_and_reload_each_undo_to_the_step_before(csm_scene, defau
     file_travel = _sun_travel(scene)
 
     # A panel edit (azimuth/elevation fields) is one undo step of the Sun's rotation.
-    scene.csm_light.sun_azimuth, scene.csm_light.sun_elevation = 120.0, 20.0
+    scene.csm_light.sun_azimuth = math.radians(120.0)
+    scene.csm_light.sun_elevation = math.radians(20.0)
     _push("Sun Elevation")
     edited = _sun_travel(scene)
     assert np.degrees(np.arccos(np.clip(edited @ file_travel, -1, 1))) > 10.0
