@@ -14,6 +14,27 @@ const int SOFT_FILTER_SAMPLES = 12;
 const float SOFT_RADIUS_LIMIT_TEXELS = 48.0;
 const float GOLDEN_ANGLE = 2.39996323;
 
+/* Texels on a side of a block of shadow_nearest_blocks (render/blocker_search.py): the
+ * atlas's nearest stored depth per block. A block is wider than SOFT_RADIUS_LIMIT_TEXELS,
+ * so the 3x3 blocks around a point hold everything its search can reach. */
+const float NEAREST_BLOCK_TEXELS = 64.0;
+
+/* The nearest depth (window depth, 1 for none) stored within reach of atlas-tile position
+ * `texel` of `tile`. Blocks may straddle a neighbouring tile: its depths only make the
+ * bound nearer, so the search wider, never too narrow. */
+float nearest_depth_within_reach(ShadowTileData tile, vec2 texel)
+{
+  vec2 in_tile = clamp(texel, vec2(0.0), vec2(tile.resolution - 1.0));
+  ivec2 block = ivec2((tile.atlas_origin + in_tile) / NEAREST_BLOCK_TEXELS);
+  ivec2 last = textureSize(shadow_nearest_blocks, 0) - 1;
+  float nearest = 1.0;
+  for (int i = 0; i < 9; i++) {
+    ivec2 b = clamp(block + ivec2(i % 3 - 1, i / 3 - 1), ivec2(0), last);
+    nearest = min(nearest, texelFetch(shadow_nearest_blocks, b, 0).r);
+  }
+  return nearest;
+}
+
 /* A per-pixel rotation in 0..2pi (interleaved gradient noise, Jimenez 2014): neighbouring
  * pixels sample the disk at other angles, so the few samples read as fine grain instead of
  * banding. */
@@ -92,8 +113,11 @@ float soft_shadow(ShadowTileData tile, float light_size, vec2 texel, float compa
   vec2 origin = tile.atlas_origin;
   float last_texel = tile.resolution - 1.0;
   /* 1. Blocker search: where could something stand between this point and the light?
-   * Up to the nearest depth anything in this tile has (display_near). */
-  float nearest = max(tile.display_near, tile.light_near);
+   * Up to the nearest caster within the search's reach: a search sized to the tile's
+   * nearest caster (display_near) spread a low caster's few taps over many times its
+   * cone, and its penumbra's lit side went unseen. */
+  float nearest = max(max(tile.display_near, tile.light_near),
+                      shadow_linear_depth(nearest_depth_within_reach(tile, texel), tile));
   vec2 search = max(limit_soft_radius(penumbra_radius_texels(
                         tile, light_size, receiver_linear, nearest, texel_world_xy)),
                     vec2(1.0));

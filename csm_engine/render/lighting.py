@@ -64,6 +64,8 @@ def draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlus
         lighting.uniform_sampler("gbuffer_depth", gbuffer.view_depth)
         lighting.uniform_sampler("shadow_atlas", atlas.depth)
         lighting.uniform_sampler("shadow_partial", atlas.partial)
+        lighting.uniform_sampler("shadow_nearest_blocks", targets.white()
+                                 if atlas.nearest_blocks is None else atlas.nearest_blocks)
         lighting.uniform_sampler("ambient_occlusion", ao_texture)
         lighting.uniform_sampler("gbuffer_emission", gbuffer.emission)
         lighting.uniform_sampler("gbuffer_facet", gbuffer.facet)

@@ -9,6 +9,7 @@ offscreen one that ``render_offscreen`` reads back into a ``RenderResult``. Both
 
 The passes, one module each:
 - ``shadow_atlas``: the shadow maps and their partial-caster mask;
+- ``blocker_search``: the soft filter's reach, the atlas's nearest depth per block;
 - ``gbuffer``: what the camera sees, per pixel;
 - ``visible_depth``: the G-buffer's depth range per block, for Fit to Visible Depth;
 - ``ambient_occlusion``: half-resolution AO from the G-buffer;
@@ -36,6 +37,7 @@ from .readback import read_images
 # RenderTargetError: what the engine tells the user when a target cannot be allocated.
 from .resources import RenderTargetError, Targets  # noqa: F401
 from .result import PassCounts, RenderResult
+from .blocker_search import nearest_blocks
 from .shadow_atlas import allocate_atlas, draw_shadow_atlas
 from .visible_depth import VisibleDepth
 
@@ -146,11 +148,15 @@ class Pipeline:
         # and its matrix; the passes below only index into these.
         lists = self.draw_lists.lists(snap, cache, targets.white())
 
-        def shadow_pass(t):
+        def shadow_pass(atlas, t):
+            """The shadow maps; for the soft filter also its reach (``blocker_search``)."""
             signatures = self.draw_lists.caster_signatures(snap, cache, lists)
             tiles = draw_shadow_atlas(targets, snap, plan, atlas, lists, instances,
                                       signatures)
-            return tiles, self._sync(atlas.framebuffer, "shadow", t)
+            if snap.settings.shadow_filter == "SOFT":
+                atlas = atlas._replace(
+                    nearest_blocks=nearest_blocks(targets, atlas, tiles.drawn))
+            return tiles, atlas, self._sync(atlas.framebuffer, "shadow", t)
 
         def gbuffer_pass(t):
             gbuffer, kept = draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo,
@@ -168,9 +174,9 @@ class Pipeline:
             self._warn(plan.warnings)
             atlas = allocate_atlas(targets, plan, self.warnings)
             frame_ubo = targets.frame_ubo(pack_frame(snap, plan, like=frame_data))
-            tiles, t = shadow_pass(t)
+            tiles, atlas, t = shadow_pass(atlas, t)
         else:
-            tiles, t = shadow_pass(t)
+            tiles, atlas, t = shadow_pass(atlas, t)
             gbuffer, gbuffer_kept, t = gbuffer_pass(t)
 
         ambient_occlusion = draw_ambient_occlusion(targets, snap, frame_ubo, frame_data,

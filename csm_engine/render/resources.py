@@ -46,6 +46,13 @@ class AtlasTiles:
 
 
 @dataclass
+class NearestBlocks:
+    """The atlas texture ``blocker_search`` reduced, and the texture it reduced it to."""
+    atlas: object
+    texture: object
+
+
+@dataclass
 class PartialMarks:
     """The atlas's partial-caster mask texture, and whether it may hold marks (a texture
     new to us holds anything)."""
@@ -64,6 +71,7 @@ class FrameCache:
     depth_blocks: object = None      # visible_depth's blocks of the held G-buffer
     atlas_tiles: AtlasTiles = None
     partial_marks: PartialMarks = None
+    nearest_blocks: NearestBlocks = None
 
     def forget(self):
         """Draw every pass again at the next frame, as for a frame that changed all."""

@@ -162,7 +162,8 @@ PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_normal"),
                                                  ("FLOAT_2D", "ao_half")),
                            outputs=(("VEC2", "out_ao_depth"),),
                            defines=(("AO_BLUR", "1"),))
-PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),)
+PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),
+                                     ("FLOAT_2D", "shadow_nearest_blocks"))
 
 # One lighting program per Shadow Filter setting (SHADOW_FILTER, see shadow_lookup.glsl): the
 # plain "lighting" is PCF. Each has "_points" and "_spots" twins with the point- and

@@ -30,6 +30,8 @@ class ShadowAtlas(NamedTuple):
     depth: object           # the atlas (DEPTH_COMPONENT32F)
     partial: object         # the partial-caster mask (R8), the atlas's size
     framebuffer: object     # depth only
+    # The soft filter's nearest depth per block (``blocker_search``), None for the others.
+    nearest_blocks: object = None
 
 
 class TileSignature(NamedTuple):
