@@ -82,10 +82,6 @@ class Pipeline:
     def benchmark_skip_gpu_calls(self, value):
         self.targets.benchmark_skip_gpu_calls = value
 
-    def _texture(self, name, size, fmt):
-        """``Targets.texture`` (tests allocate through it to see a failure's message)."""
-        return self.targets.texture(name, size, fmt)
-
     def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False):
         """This view's shadow planning, the one place the pipeline calls the planner: the
         frame's plan (``depth_blocks``: the visible depths Fit to Visible Depth fits to),

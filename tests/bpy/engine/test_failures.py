@@ -91,7 +91,7 @@ def test_render_targets_that_cannot_be_allocated_are_named(box_on_ground, monkey
     renderer = pipeline.Pipeline()
     monkeypatch.setattr(gpu.types, "GPUTexture", NoMemory)
     with pytest.raises(pipeline.RenderTargetError) as failure:
-        renderer._texture("albedo", (16384, 16384), 'RGBA16F')
+        renderer.targets.texture("albedo", (16384, 16384), 'RGBA16F')
     message = str(failure.value)
     assert "16384x16384" in message and "albedo" in message and "2,048 MB" in message
     assert engine.failure_message(failure.value) == message
