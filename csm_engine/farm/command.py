@@ -36,13 +36,23 @@ BLEND_MAGIC = (b"BLENDER", b"\x1f\x8b", b"\x28\xb5\x2f\xfd")
 MAX_LOCAL_WORKERS = 256
 
 
+# Options of either command that take a value: their value is not the scene.
+_VALUE_OPTIONS = {"--frames", "--output", "--workers", "--scheduler", "--set",
+                  "--resolution", "--allow-folder"}
+
+
 def is_farm_command(argv):
-    """Whether ``argv`` asks for the farm: its first argument that is not an option is a
-    .blend file (the one-scene command takes a .json)."""
+    """Whether ``argv`` asks for the farm: its first argument that is neither an option
+    nor an option's value is a .blend file (the one-scene command takes a .json)."""
+    skip = False
     for arg in argv:
-        if arg == "--":
+        if skip:
+            skip = False
+        elif arg == "--":
             return False
-        if not arg.startswith("-"):
+        elif arg.startswith("-"):
+            skip = arg in _VALUE_OPTIONS
+        else:
             return arg.lower().endswith(".blend")
     return False
 
