@@ -15,17 +15,18 @@ says in one line how to install it. The coordinator never imports bpy: the worke
 """
 
 import argparse
+import dataclasses
 import importlib.util
 import os
-import shlex
 import sys
 import time
 import types
 import uuid
 
-from ..blender.cli import (EXIT_NO_BLENDER, EXIT_RENDER, EXIT_SCENE, EXIT_USAGE, CLIError,
+from ..blender.cli import (EXIT_NO_BLENDER, EXIT_RENDER, EXIT_SCENE, CLIError,
                            apply_override, shell_path)
 from . import frames as frame_rules
+from . import worker
 from .worker import FAILED, PRESENT, WRITTEN, FarmJob
 
 EXIT_NO_DASK = 7          # this Python has no dask.distributed
@@ -71,7 +72,8 @@ def build_parser(prog):
                              "renders/f_####.png writes renders/f_0001.png, ...")
     where = parser.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=None, metavar="N",
-                       help="start a local cluster of N worker processes (default 1)")
+                       help="start a local cluster of N worker processes (default 1); 0 "
+                            "renders in this process, without Dask")
     where.add_argument("--scheduler", metavar="ADDRESS",
                        help="use an existing Dask cluster, e.g. tcp://10.0.0.5:8786")
     parser.add_argument("--overwrite", action="store_true",
@@ -149,31 +151,36 @@ def run(argv, prog):
         pattern = frame_rules.check_pattern(args.output)
     except frame_rules.FrameSpecError as error:
         raise CLIError(str(error)) from None
-    workers = 1 if args.workers is None else args.workers
-    if not args.scheduler and not 1 <= workers <= MAX_LOCAL_WORKERS:
-        raise CLIError(f"--workers: {workers} is outside 1..{MAX_LOCAL_WORKERS}")
+    args.workers = 1 if args.workers is None else args.workers
+    if not args.scheduler and not 0 <= args.workers <= MAX_LOCAL_WORKERS:
+        raise CLIError(f"--workers: {args.workers} is outside 0..{MAX_LOCAL_WORKERS}")
     if args.scheduler and "://" not in args.scheduler:
         raise CLIError(f"--scheduler: '{args.scheduler}' is not an address like "
                        "tcp://HOST:8786")
-    args.workers = workers
     overrides = check_overrides(args.overrides)
     if wanted is not None:
-        todo, present = frame_rules.frames_to_render(pattern, wanted, args.overwrite)
+        todo, _ = frame_rules.frames_to_render(pattern, wanted, args.overwrite)
         if not todo:
             say(f"all {len(wanted)} frames are there already "
                 f"({shell_path(frame_rules.frame_path(pattern, wanted[0]))} ...); "
                 "--overwrite renders them again")
             return 0
-    distributed = import_dask()
+    distributed = import_dask() if args.scheduler or args.workers else None
     if not args.scheduler and importlib.util.find_spec("bpy") is None:
-        raise CLIError(f"{sys.executable} has no bpy, and the local workers run this Python: "
-                       "pip install bpy==5.0.1 (Python 3.11), or give --scheduler",
+        where = "this process renders" if not args.workers else \
+            "the local workers run this Python"
+        raise CLIError(f"{sys.executable} has no bpy, and {where}: pip install bpy==5.0.1 "
+                       "(Python 3.11)" + ("" if not args.workers else ", or give --scheduler"),
                        EXIT_NO_BLENDER)
     started = time.perf_counter()
+    job = FarmJob(blend, pattern, args.overwrite, overrides, wanted[0] if wanted else 0)
+    if distributed is None:
+        return _render_all(InProcess(), job, wanted, "in this process", started)
     client, cluster = start_cluster(distributed, args)
     try:
-        return _render_all(distributed, client, args, blend, pattern, wanted, overrides,
-                           started)
+        where = "on " + (args.scheduler or
+                         f"{args.workers} local worker{'s' * (args.workers > 1)}")
+        return _render_all(OnCluster(distributed, client), job, wanted, where, started)
     except KeyboardInterrupt:
         say("interrupted; frames written so far are complete, the same command renders "
             "the rest")
@@ -184,66 +191,88 @@ def run(argv, prog):
             cluster.close()
 
 
-def _render_all(distributed, client, args, blend, pattern, wanted, overrides, started):
-    from . import worker
-    job = FarmJob(blend, pattern, args.overwrite, overrides,
-                  wanted[0] if wanted else 0)
+class InProcess:
+    """``--workers 0``: this process is the one worker (no Dask; a farm that runs one
+    command per chunk of frames, such as an Open Job Description step, uses it)."""
+
+    def scene_frames(self, job):
+        return worker.scene_frames(job)
+
+    def reports(self, job, todo):
+        for frame in todo:
+            yield frame, worker.render_frame(job, frame,
+                                             frame_rules.frame_path(job.pattern, frame))
+
+
+class OnCluster:
+    """One Dask task per frame, handed out in frame order."""
+
+    def __init__(self, distributed, client):
+        self.distributed = distributed
+        self.client = client
+
+    def scene_frames(self, job):
+        # The worker that reads the range keeps the file open for its frames.
+        return self.client.submit(worker.scene_frames, job, pure=False).result()
+
+    def reports(self, job, todo):
+        run_id = uuid.uuid4().hex[:8]
+        futures = {}
+        for index, frame in enumerate(todo):
+            # Higher priority runs first: frames go out in order, so each worker renders
+            # an increasing sequence and its caches follow the animation.
+            future = self.client.submit(worker.render_frame, job, frame,
+                                        frame_rules.frame_path(job.pattern, frame),
+                                        key=f"csm-frame-{frame}-{run_id}", pure=False,
+                                        priority=len(todo) - index)
+            futures[future] = frame
+        for future in self.distributed.as_completed(list(futures)):
+            frame = futures[future]
+            try:
+                report = future.result()
+            except Exception as error:   # a worker lost too often, or a bug in a worker
+                reason = " ".join(str(error).split()) or type(error).__name__
+                report = worker.FrameReport(
+                    frame, frame_rules.frame_path(job.pattern, frame), FAILED,
+                    message=f"frame {frame}: {type(error).__name__}: {reason}")
+            yield frame, report
+
+
+def _render_all(runner, job, wanted, where, started):
+    pattern = job.pattern
     if wanted is None:
-        # The file's own range, as blender -a renders it; the worker that reads it keeps
-        # the file open for its frames.
-        wanted = client.submit(worker.scene_frames, job, pure=False).result()
+        # The file's own range, as blender -a renders it.
+        wanted = runner.scene_frames(job)
         if not wanted:
-            raise CLIError(f"{shell_path(blend)}: its frame range is empty")
-        job = FarmJob(blend, pattern, args.overwrite, overrides, wanted[0])
-    todo, present = frame_rules.frames_to_render(pattern, wanted, args.overwrite)
-    where = args.scheduler or f"{args.workers} local worker{'s' * (args.workers > 1)}"
+            raise CLIError(f"{shell_path(job.blend_path)}: its frame range is empty")
+        job = dataclasses.replace(job, first_frame=wanted[0])
+    todo, present = frame_rules.frames_to_render(pattern, wanted, job.overwrite)
     kept = f", {len(present)} there already" if present else ""
-    say(f"rendering {len(todo)} of {len(wanted)} frames of {shell_path(blend)} on "
+    say(f"rendering {len(todo)} of {len(wanted)} frames of {shell_path(job.blend_path)} "
         f"{where}{kept}")
-    run_id = uuid.uuid4().hex[:8]
-    futures = {}
-    for index, frame in enumerate(todo):
-        # Higher priority runs first: frames go out in order, so each worker renders an
-        # increasing sequence and its caches follow the animation.
-        future = client.submit(worker.render_frame, job, frame,
-                               frame_rules.frame_path(pattern, frame),
-                               key=f"csm-frame-{frame}-{run_id}", pure=False,
-                               priority=len(todo) - index)
-        futures[future] = frame
-    failures = []
-    done = 0
-    for future in distributed.as_completed(list(futures)):
-        frame = futures[future]
-        path = frame_rules.frame_path(pattern, frame)
-        try:
-            report = future.result()
-        except Exception as error:      # a worker lost too often, or a bug in a worker
-            reason = " ".join(str(error).split()) or type(error).__name__
-            report = worker.FrameReport(frame, path, FAILED,
-                                        message=f"frame {frame}: {type(error).__name__}: "
-                                                f"{reason}")
-        done += 1
+    failures = 0
+    for done, (frame, report) in enumerate(runner.reports(job, todo), start=1):
         _print_worker_output(report.output)
+        path = shell_path(report.path)
         if report.status == WRITTEN:
             opened = (f", opened the file in {report.open_seconds:.1f} s"
                       if report.open_seconds else "")
-            say(f"[{done}/{len(todo)}] wrote {shell_path(path)} in "
-                f"{report.render_seconds:.2f} s (worker {report.worker}{opened})")
+            say(f"[{done}/{len(todo)}] wrote {path} in {report.render_seconds:.2f} s "
+                f"(worker {report.worker}{opened})")
         elif report.status == PRESENT:
-            say(f"[{done}/{len(todo)}] {shell_path(path)} is there already")
+            say(f"[{done}/{len(todo)}] {path} is there already")
         else:
-            failures.append(report)
+            failures += 1
             print(f"csm: error: {report.message}", file=sys.stderr, flush=True)
     missing = [frame for frame in wanted
                if not frame_rules.frame_done(frame_rules.frame_path(pattern, frame))]
-    seconds = time.perf_counter() - started
     if missing:
         listed = ", ".join(str(f) for f in missing[:10]) + (" ..." if len(missing) > 10 else "")
         print(f"csm: error: {len(missing)} of {len(wanted)} frames were not written "
               f"({listed}); the same command renders only those", file=sys.stderr)
         return EXIT_RENDER
-    say(f"all {len(wanted)} frames are there ({len(todo) - len(failures)} rendered in "
-        f"{seconds:.1f} s)")
+    say(f"all {len(wanted)} frames are there ({len(todo) - failures} rendered in "
+        f"{time.perf_counter() - started:.1f} s)")
     return 0
 
 
