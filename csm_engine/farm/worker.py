@@ -16,6 +16,7 @@ cascades of the job's first frame in every worker (see ``WorkerSession.prepare``
 
 import dataclasses
 import os
+import threading
 import time
 
 from .frames import frame_done
@@ -153,6 +154,9 @@ def _crash_once_if_asked():
 # This process's session (a worker process serves one job at a time; the scheduler may
 # hand it frames of another job sharing the cluster, which then reopens its own file).
 _SESSION = [None]
+# One Blender per process renders one frame at a time: a worker started with several
+# threads (dask worker --nthreads 4) still runs its frames one after another.
+_BLENDER = threading.Lock()
 
 
 def session(job):
@@ -169,9 +173,9 @@ def session(job):
 def scene_frames(job):
     """The file's own frames (Frame Start .. End by Frame Step), as ``blender -a`` renders
     them; opens the file in this worker, which keeps it for its frames."""
-    held, _ = session(job)
-    scene = held.scene
-    return list(range(scene.frame_start, scene.frame_end + 1, max(scene.frame_step, 1)))
+    with _BLENDER:
+        scene = session(job)[0].scene
+        return list(range(scene.frame_start, scene.frame_end + 1, max(scene.frame_step, 1)))
 
 
 def render_frame(job, frame, path):
@@ -181,11 +185,12 @@ def render_frame(job, frame, path):
     from ..blender.cli import CLIError
     if not job.overwrite and frame_done(path):
         return FrameReport(frame, path, PRESENT, worker=os.getpid())
-    try:
-        held, open_seconds = session(job)
-    except CLIError as error:
-        return FrameReport(frame, path, FAILED, message=str(error), worker=os.getpid())
-    report = held.render(frame, path)
+    with _BLENDER:
+        try:
+            held, open_seconds = session(job)
+        except CLIError as error:
+            return FrameReport(frame, path, FAILED, message=str(error), worker=os.getpid())
+        report = held.render(frame, path)
     report.open_seconds = open_seconds
     if open_seconds:
         report.output = held.output + report.output
