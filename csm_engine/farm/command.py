@@ -174,21 +174,22 @@ def run(argv, prog):
                        EXIT_NO_BLENDER)
     started = time.perf_counter()
     job = FarmJob(blend, pattern, args.overwrite, overrides, wanted[0] if wanted else 0)
-    if distributed is None:
-        return _render_all(InProcess(), job, wanted, "in this process", started)
-    client, cluster = start_cluster(distributed, args)
     try:
-        where = "on " + (args.scheduler or
-                         f"{args.workers} local worker{'s' * (args.workers > 1)}")
-        return _render_all(OnCluster(distributed, client), job, wanted, where, started)
+        if distributed is None:
+            return _render_all(InProcess(), job, wanted, "in this process", started)
+        client, cluster = start_cluster(distributed, args)
+        try:
+            where = "on " + (args.scheduler or
+                             f"{args.workers} local worker{'s' * (args.workers > 1)}")
+            return _render_all(OnCluster(distributed, client), job, wanted, where, started)
+        finally:
+            client.close()
+            if cluster is not None:
+                cluster.close()
     except KeyboardInterrupt:
-        say("interrupted; frames written so far are complete, the same command renders "
-            "the rest")
+        print("csm: interrupted; the frames written so far are complete, and the same "
+              "command renders the rest", file=sys.stderr)
         return 130
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
 
 
 class InProcess:
