@@ -50,12 +50,12 @@ def log(message):
     print(f"farm-bench: {message}", file=sys.stderr, flush=True)
 
 
-def build_flythrough(path, frames, width, height):
+def build_flythrough(path, frames, width, height, quick=False):
     """The benchmark field with its camera flying 0.3 m sideways and 0.2 m closer per
     frame over ``frames`` frames (linear keys), CSM at one render sample, saved to
-    ``path``. Returns the triangle count."""
+    ``path``. ``quick``: 4 Suzannes at subdivision level 1. Returns the triangle count."""
     import bpy
-    scene = build_field_scene(MONKEYS, level=2)
+    scene = build_field_scene(4 if quick else MONKEYS, level=1 if quick else 2)
     scene.render.engine = "CSM"
     scene.csm.render_samples = 1
     scene.render.resolution_x, scene.render.resolution_y = width, height
@@ -220,10 +220,11 @@ def markdown(measured):
         "",
         "```sh",
         f"PYTHONPATH=.:tools .venv/bin/python -m csm_tools.farm_bench --frames "
-        f"{m['frames']} --resolution {m['resolution']} --markdown docs/animations-and-farms.md",
+        f"{m['frames']} --resolution {m['resolution']}{' --quick' * m['quick']} "
+        "--markdown docs/animations-and-farms.md",
         "```",
         "",
-        f"Scene: the benchmark's field of {MONKEYS} subdivided Suzannes "
+        f"Scene: the benchmark's field of {m['monkeys']} subdivided Suzannes "
         f"({m['triangles']:,} triangles) at {m['resolution']}, one render sample, the "
         f"camera moving before every frame; {m['frames']} frames.",
         "",
@@ -276,6 +277,8 @@ def markdown(measured):
 def build_parser(prog=PROG):
     parser = argparse.ArgumentParser(prog=prog, description=__doc__.split("\n\n")[0])
     parser.add_argument("--frames", type=int, default=24)
+    parser.add_argument("--quick", action="store_true",
+                        help="a small field (4 Suzannes, level 1); checks the tool runs")
     parser.add_argument("--resolution", default="1280x720", metavar="WxH")
     parser.add_argument("--markdown", metavar="PAGE",
                         help="rewrite the generated section of this page")
@@ -288,19 +291,20 @@ def run(argv, prog=PROG):
     width, height = parse_resolution(args.resolution)
     frames = max(args.frames, 3)
     measured = {"frames": frames, "resolution": f"{width}x{height}",
+                "monkeys": 4 if args.quick else MONKEYS, "quick": args.quick,
                 "cores": os.cpu_count(), "machine": f"{platform.machine()}, "
                 f"{os.cpu_count()} cores, Mesa llvmpipe through EGL",
                 "date": time.strftime("%Y-%m-%d")}
     with tempfile.TemporaryDirectory(prefix="csm-farm-bench-") as folder:
         blend = os.path.join(folder, "flythrough.blend")
         log("building the fly-through")
-        measured["triangles"] = build_flythrough(blend, frames, width, height)
+        measured["triangles"] = build_flythrough(blend, frames, width, height, args.quick)
         log("one process")
         reference = os.path.join(folder, "one_process")
         os.mkdir(reference)
         measured.update(one_process(blend, frames, reference))
         log(f"  {measured}")
-        measured["bpy_import_s"] = bpy_import_seconds()
+        measured["bpy_import_s"] = bpy_import_seconds(1 if args.quick else 3)
         log("scheduler")
         (measured["cluster_start_s"], measured["round_trip_s"],
          measured["queued_task_s"]) = scheduler_overhead()
