@@ -75,6 +75,23 @@ def build_flythrough(path, frames, width, height, quick=False):
     return triangles
 
 
+def thread_cpu_seconds():
+    """CPU seconds of each of this process's threads so far, by (thread id, name), from
+    /proc (Linux): Mesa names its drawing threads llvmpipe-0, llvmpipe-1, ..."""
+    seconds = {}
+    tick = os.sysconf("SC_CLK_TCK")
+    for tid in os.listdir("/proc/self/task"):
+        try:
+            with open(f"/proc/self/task/{tid}/comm") as handle:
+                name = handle.read().strip()
+            with open(f"/proc/self/task/{tid}/stat") as handle:
+                fields = handle.read().rsplit(")", 1)[1].split()
+        except OSError:         # the thread ended meanwhile
+            continue
+        seconds[(tid, name)] = (int(fields[11]) + int(fields[12])) / tick
+    return seconds
+
+
 def one_process(path, frames, folder):
     """Seconds: opening the .blend, the first render, and each later frame's render and
     PNG write, in this process."""
@@ -89,7 +106,10 @@ def one_process(path, frames, folder):
     scene.render.image_settings.color_mode = 'RGB'
     engine.forget_final_render_meshes()
     renders, writes, cpu = [], [], []
+    threads_before = None
     for frame in range(1, frames + 1):
+        if frame == 2:
+            threads_before = thread_cpu_seconds()
         scene.frame_set(frame)
         # CPU time of every thread of this process (llvmpipe's included).
         cpu_start = time.process_time()
@@ -102,7 +122,11 @@ def one_process(path, frames, folder):
         cli.write_render_png(scene, os.path.join(folder, f"f_{frame:04d}.png"))
         writes.append(time.perf_counter() - start)
         cpu.append(time.process_time() - cpu_start)
-    return {"frame_cpu_s": statistics.median(cpu[1:]),
+    threads = {key: value - threads_before.get(key, 0.0)
+               for key, value in thread_cpu_seconds().items()}
+    drawing = sum(v for (_, name), v in threads.items() if name.startswith("llvmpipe"))
+    return {"llvmpipe_threads": sum(1 for _, name in threads if name.startswith("llvmpipe")),
+            "llvmpipe_share": drawing / max(sum(threads.values()), 1e-9),"frame_cpu_s": statistics.median(cpu[1:]),
             "frame_cores_busy": statistics.median(
                 c / (r + w) for c, r, w in zip(cpu[1:], renders[1:], writes[1:])),"open_s": opened, "first_render_s": renders[0],
             "frame_render_s": statistics.median(renders[1:]),
@@ -200,6 +224,17 @@ def identical(folder_a, folder_b, frames):
                for f in range(1, frames + 1))
 
 
+def two_worker_bound(drawing_share, cores):
+    """The most 2 workers can gain over 1 on an idle machine of ``cores`` cores when a
+    fraction ``drawing_share`` of a frame's CPU time is llvmpipe's drawing, spread over
+    every core, and the rest runs on one thread: one worker takes rest + drawing / cores
+    per frame; two take half their own frame time, or all the cores' time, whichever is
+    longer."""
+    rest = 1.0 - drawing_share
+    one = rest + drawing_share / cores
+    return one / max(one / 2.0, 1.0 / cores)
+
+
 def paper(measured, frames=PAPER_FRAMES):
     """Seconds for ``frames`` frames on N machines, one worker each: a worker's start-up
     and first frame, then its share of the rest at the steady per-frame cost."""
@@ -238,6 +273,8 @@ def markdown(measured):
         f"| each later frame: writing the PNG | {m['frame_write_s']:.3f} |",
         f"| each later frame: CPU time of all the process's threads | "
         f"{m['frame_cpu_s']:.3f} (= {m['frame_cores_busy']:.1f} cores busy) |",
+        f"| each later frame: share of that CPU time in llvmpipe's {m['llvmpipe_threads']} "
+        f"drawing threads | {100 * m['llvmpipe_share']:.0f} % |",
         f"| local Dask cluster start (1 worker process, no bpy) | {m['cluster_start_s']:.2f} |",
         f"| scheduler round trip of one empty task | {m['round_trip_s']:.4f} |",
         f"| scheduler time per empty task, many queued | {m['queued_task_s']:.4f} |",
@@ -258,7 +295,13 @@ def markdown(measured):
     lines += [
         "",
         f"Two workers against one: **{walls[1] / walls[2]:.2f}x** "
-        f"(frames pixel-identical: {'yes' if m['identical'] else 'NO'}).",
+        f"(frames pixel-identical: {'yes' if m['identical'] else 'NO'}). On an otherwise "
+        f"idle machine of {m['cores']} cores it could be at most "
+        f"**{two_worker_bound(m['llvmpipe_share'], m['cores']):.2f}x**: llvmpipe already draws each frame on "
+        f"{m['llvmpipe_threads']} threads, so a second worker can only overlap the "
+        f"{100 * (1 - m['llvmpipe_share']):.0f} % of a frame's CPU time spent outside them "
+        "(one worker: that part, then the drawing spread over the cores; two: every core "
+        "busy all the time).",
         "",
         f"On paper, {PAPER_FRAMES} frames on N machines (one worker each), from the "
         f"numbers above: a worker's start-up and first frame {m['startup_s']:.1f} s "
