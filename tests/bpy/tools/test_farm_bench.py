@@ -18,6 +18,11 @@ def test_quick_farm_bench_measures_and_writes_the_page(tmp_path):
     text = page.read_text()
     assert "old" not in text and text.endswith("prose\n")
     assert "frames pixel-identical: yes" in text
+    # llvmpipe's drawing threads are found, and bound what a second worker can gain.
+    share = float(re.search(r"llvmpipe's \d+ drawing threads \| (\d+) %", text).group(1))
+    assert 0 < share <= 100
+    bound = float(re.search(r"it could be at most \*\*(\d+\.\d+)x", text).group(1))
+    assert 1.0 <= bound <= 2.0
     for row in ("`import bpy` in a new worker process", "first render", "| 1 |", "| 2 |",
                 "LP_NUM_THREADS=1"):
         assert row in text, row
