@@ -67,7 +67,6 @@ class WorkerSession:
         from ..blender import cli, engine
         from ..core.captured_output import CapturedOutput
         self.job = job
-        self.rendered = 0
         start = time.perf_counter()
         # The engine must be registered before the file is read, or Blender reports the
         # file's CSM engine as missing.
@@ -90,15 +89,15 @@ class WorkerSession:
         engine.forget_final_render_view()
         self.scene = scene
         self.open_seconds = time.perf_counter() - start
-        self.frozen = False
+        self.prepared = False
 
     def prepare(self, frame):
         """Before the first frame: with Freeze Cascades on, render the job's first frame
         (and keep only its cascades) unless that is the frame asked for, so every worker
         holds the cascades ``blender -a`` would hold over the same range."""
-        if self.frozen:
+        if self.prepared:
             return
-        self.frozen = True
+        self.prepared = True
         if self.scene.csm.freeze_cascades and frame != self.job.first_frame:
             self._render(self.job.first_frame)
 
@@ -136,7 +135,6 @@ class WorkerSession:
             return report
         report.write_seconds = time.perf_counter() - start
         report.status = WRITTEN
-        self.rendered += 1
         return report
 
 
