@@ -56,7 +56,8 @@ ZIP_TIMESTAMP = (2024, 1, 1, 0, 0, 0)
 # The [project] keys the wheel metadata is written from; any other key is refused so a
 # setting added to pyproject.toml can never be silently dropped from the wheel.
 PROJECT_KEYS = {"name", "dynamic", "description", "readme", "requires-python", "license",
-                "authors", "classifiers", "keywords", "dependencies", "scripts", "urls"}
+                "authors", "classifiers", "keywords", "dependencies",
+                "optional-dependencies", "scripts", "urls"}
 
 
 class BuildError(Exception):
@@ -278,6 +279,9 @@ def write_metadata(project, version, root=REPO_ROOT):
     if "requires-python" in project:
         lines.append(f"Requires-Python: {project['requires-python']}")
     lines += [f"Requires-Dist: {d}" for d in project.get("dependencies", [])]
+    for extra, requirements in project.get("optional-dependencies", {}).items():
+        lines.append(f"Provides-Extra: {extra}")
+        lines += [f'Requires-Dist: {d}; extra == "{extra}"' for d in requirements]
     body = ""
     if "readme" in project:
         readme = project["readme"]

@@ -41,7 +41,9 @@ DEFAULT_SCREENSHOT = "csm_default.png"
 def build_parser(prog="python -m csm_engine"):
     parser = argparse.ArgumentParser(
         prog=prog,
-        description="Render a CS562-style JSON scene with the CSM engine and save a PNG.")
+        description="Render a CS562-style JSON scene with the CSM engine and save a PNG.",
+        epilog=f"A .blend's animation: {prog} FILE.blend --frames 1-240 --output "
+               "renders/f_####.png --workers N (see docs/animations-and-farms.md).")
     parser.add_argument("scene", nargs="?", help="scene .json (default: the bundled scene)")
     parser.add_argument("screenshot", nargs="?",
                         help=f"PNG to write, exactly this path (default: {DEFAULT_SCREENSHOT})")
@@ -453,6 +455,10 @@ def run_reporting_errors(run_command, argv, prog, label):
 
 
 def main(argv=None, prog="python -m csm_engine"):
+    argv = sys.argv[1:] if argv is None else argv
+    from ..farm import command as farm      # FILE.blend --frames ...: the animation farm
+    if farm.is_farm_command(argv):
+        return farm.main(argv, prog)
     return run_reporting_errors(run, argv, prog, "csm")
 
 

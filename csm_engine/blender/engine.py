@@ -108,6 +108,13 @@ def forget_final_render_passes():
     _FINAL_RENDER_RESOURCES.frame_cache.forget()
 
 
+def forget_final_render_view():
+    """Make the next final render plan its shadows as the first render of a session
+    does: nothing frozen by Freeze Cascades, nothing held from an earlier render (the
+    farm calls it when a worker opens another file)."""
+    _FINAL_RENDER_VIEW.__init__()
+
+
 def _final_mesh_cache():
     if not _FINAL_RENDER_MESHES:
         _FINAL_RENDER_MESHES.append(mesh_cache.MeshCache(check_contents=True, realize=False))

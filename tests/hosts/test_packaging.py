@@ -162,6 +162,10 @@ def test_wheel_has_the_package_with_shaders_data_and_a_csm_render_command(archiv
         # Users bring their own bpy: the wheel must never pull one in.
         requires = [line for line in metadata.splitlines() if line.startswith("Requires-Dist:")]
         assert not [r for r in requires if "bpy" in r.lower()], requires
+        # The farm's Dask comes only with the extra: pip install csm_engine[farm].
+        assert "Provides-Extra: farm" in metadata.splitlines()
+        assert [r for r in requires if r.endswith('; extra == "farm"')] == \
+            ['Requires-Dist: distributed>=2024.1; extra == "farm"'], requires
         # RECORD lists every other file with its size and hash, as pip checks on install.
         record = {line.split(",")[0] for line in bundle.read(f"{info}/RECORD").decode().splitlines()}
         assert record == names, sorted(record ^ names)

@@ -26,6 +26,7 @@ def test_quick_benchmark_reports_both_engines_and_a_free_camera_redraw(tmp_path)
         assert scene["triangles"] > 1000, scene["name"]
         assert scene["csm"]["median_s"] > 0 and scene["eevee"]["median_s"] > 0
         assert scene["ratio"] == scene["eevee"]["median_s"] / scene["csm"]["median_s"]
+        assert scene["csm"]["flythrough_s"] > 0, scene["name"]
         split = scene["csm_split_s"]
         for step in ("mesh_upload", "python_setup", "shadow", "gbuffer", "lighting",
                      "readback"):
@@ -49,6 +50,8 @@ def test_quick_benchmark_reports_both_engines_and_a_free_camera_redraw(tmp_path)
     assert text.startswith("# Page\nprose stays\n") and text.endswith("more prose\n")
     field_ratio = f"**{field['ratio']:.1f}x**"
     assert f"| field | {field['triangles']:,} |" in text and field_ratio in text
+    flythrough = field["eevee"]["median_s"] / field["csm"]["flythrough_s"]
+    assert "CSM fly-through" in text and f"| {flythrough:.1f}x |" in text
 
 
 def test_markdown_page_without_markers_is_refused_before_the_run(tmp_path):
