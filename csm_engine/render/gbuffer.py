@@ -15,7 +15,7 @@ import numpy as np
 
 from ..core.frame_layout import FRAME_LAYOUT
 from ..core.shadow_plan import front_to_back
-from . import shaders
+from . import instancing, shaders
 from .draw_lists import GBUFFER_PROGRAMS, MATERIAL_SAMPLERS
 from .resources import HeldGBuffer
 
@@ -110,49 +110,104 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
 def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuffer_fb,
           width, height):
     import gpu
-    library = shaders.LIBRARY
     items = lists.items
     mirrored = instances.mirrored
-    world_from_objects_gl = instances.world_from_objects_gl
+    per_program = []
+    for program, drawn in zip(GBUFFER_PROGRAMS, lists.gbuffer_masks):
+        rows = order[drawn[order]]
+        if len(rows):
+            per_program.append((program, _program_runs(lists, rows, mirrored,
+                                                        terminator_offsets)))
+    matrices = _instanced_matrices(instances, per_program)
     with gbuffer_fb.bind():
         gpu.state.viewport_set(0, 0, width, height)
         targets.call(gbuffer_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
         gpu.state.depth_test_set('LESS_EQUAL')
         gpu.state.depth_mask_set(True)
-        culling = 'NONE'
+        state = _DrawState()
+        offset = 0      # the next instanced run's first matrix in ``matrices``
         # Opaque before alpha-tested; untextured materials with the program that samples
         # no texture, meshes with tangents (normal maps) with the programs that read them.
-        for program, drawn in zip(GBUFFER_PROGRAMS, lists.gbuffer_masks):
-            rows = order[drawn[order]]
-            if not len(rows):
-                continue
-            shader = library.get(program.program)
-            shader.bind()
-            shader.uniform_block("frame", frame_ubo)
-            bound = None
-            offset = None
-            for index in rows.tolist():
-                draws = getattr(items[index], program.draws)
-                shader.uniform_float("world_from_object", world_from_objects_gl[index])
+        for program, runs in per_program:
+            for run in runs:
+                index = int(run[0])
+                if len(run) > 1:
+                    shader = state.use(program, True, frame_ubo)
+                    shader.uniform_sampler("instance_matrices", matrices)
+                    shader.uniform_int("instance_offset", offset)
+                    offset += len(run)
+                else:
+                    shader = state.use(program, False, frame_ubo)
+                    shader.uniform_float("world_from_object",
+                                         instances.world_from_objects_gl[index].tolist())
                 # Most objects share Blender's default: set only when it changes.
-                if terminator_offsets[index] != offset:
-                    offset = terminator_offsets[index]
-                    shader.uniform_float("terminator_offset", float(offset))
-                for batch, material in draws:
+                if terminator_offsets[index] != state.offset:
+                    state.offset = terminator_offsets[index]
+                    shader.uniform_float("terminator_offset", float(state.offset))
+                for batch, material in getattr(items[index], program.draws):
                     wanted = ('FRONT' if mirrored[index] else 'BACK') \
                         if material.backface_culling else 'NONE'
-                    if wanted != culling:
+                    if wanted != state.culling:
                         gpu.state.face_culling_set(wanted)
-                        culling = wanted
-                    if material is not bound:
+                        state.culling = wanted
+                    if material is not state.bound:
                         shader.uniform_block("material", material.block)
                         if program.textured:
                             for name, texture in zip(MATERIAL_SAMPLERS, material.textures):
                                 shader.uniform_sampler(name, texture)
-                        bound = material
-                    targets.call(batch.draw, shader)
+                        state.bound = material
+                    if len(run) > 1:
+                        targets.call(batch.draw_instanced, shader, instance_count=len(run))
+                    else:
+                        targets.call(batch.draw, shader)
         gpu.state.face_culling_set('NONE')
         gpu.state.depth_test_set('NONE')
+
+
+class _DrawState:
+    """The G-buffer's GL state while it draws: the bound program, material, culling and
+    Shadow Terminator Geometry Offset, so each is set only when it changes."""
+    __slots__ = ("shader", "bound", "culling", "offset")
+
+    def __init__(self):
+        self.shader, self.bound, self.culling, self.offset = None, None, 'NONE', None
+
+    def use(self, program, instanced, frame_ubo):
+        shader = shaders.LIBRARY.get(program.program + ("_instanced" if instanced else ""))
+        if shader is not self.shader:
+            shader.bind()
+            shader.uniform_block("frame", frame_ubo)
+            # A newly bound program has none of the last one's uniforms.
+            self.shader, self.bound, self.offset = shader, None, None
+        return shader
+
+
+def _program_runs(lists, rows, mirrored, terminator_offsets):
+    """One program's rows (near to far) as runs drawn together: copies of one mesh with
+    one winding and one Shadow Terminator Geometry Offset. Without instancing every row
+    is a run of its own, in order."""
+    if not lists.instancing:
+        return [rows[i:i + 1] for i in range(len(rows))]
+    # The runs' key: the mesh's group, then the winding and the offset (few distinct).
+    offsets = np.unique(terminator_offsets, return_inverse=True)[1].ravel()
+    keys = (lists.groups * 2 + mirrored) * (int(offsets.max(initial=0)) + 1) + offsets
+    return instancing.runs(rows, keys)
+
+
+def _instanced_matrices(instances, per_program):
+    """The texture of the instanced runs' world matrices, in draw order: the one made for
+    the same runs before (an unmoved view, a re-render), else a new upload."""
+    rows = [run for _program, runs in per_program for run in runs if len(run) > 1]
+    if not rows:
+        return None
+    rows = np.concatenate(rows)
+    key = rows.tobytes()
+    held = instances.gbuffer_matrices
+    if held[0] == key:
+        return held[1]
+    texture = instancing.matrix_texture(instances.world_from_objects_gl[rows])
+    instances.gbuffer_matrices = (key, texture)
+    return texture
 
 
 def gbuffer_contents(targets, snap, cache, lists, order, world_from_objects,
