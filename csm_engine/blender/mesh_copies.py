@@ -55,12 +55,29 @@ def euler_xyz(rotations):
     return np.stack([x, y, z], axis=-1)
 
 
+def _placements(scene_objects):
+    """(N, 3) translations, file Euler degrees and scales of the scene objects."""
+    arrays = [np.array([getattr(o, name).as_tuple() for o in scene_objects],
+                       dtype=np.float64).reshape(-1, 3)
+              for name in ("translate", "rotate", "scale")]
+    return arrays
+
+
+def placement_matrices(scene_objects):
+    """Each scene object's world matrix in Blender's axes, (N, 4, 4):
+    ``conventions.object_matrix_zup`` for all of them at once."""
+    translate, rotate, scale = _placements(scene_objects)
+    yup = np.zeros((len(translate), 4, 4))
+    yup[:, :3, :3] = _rotations_yup(rotate) * scale[:, None, :]
+    yup[:, :3, 3] = translate
+    yup[:, 3, 3] = 1.0
+    return conventions.ZUP_FROM_YUP @ yup @ conventions.YUP_FROM_ZUP
+
+
 def copy_transforms(scene_objects):
     """Each scene object's placement as Blender location, XYZ Euler (radians) and scale:
     (N, 3) arrays each, equal to ``conventions.object_matrix_zup``."""
-    translate = np.array([o.translate.as_tuple() for o in scene_objects], dtype=np.float64)
-    rotate = np.array([o.rotate.as_tuple() for o in scene_objects], dtype=np.float64)
-    scale = np.array([o.scale.as_tuple() for o in scene_objects], dtype=np.float64)
+    translate, rotate, scale = _placements(scene_objects)
     zup_from_yup = conventions.ZUP_FROM_YUP[:3, :3]
     location = translate @ zup_from_yup.T
     rotation = zup_from_yup @ _rotations_yup(rotate) @ zup_from_yup.T

@@ -19,7 +19,7 @@ import mathutils
 import numpy as np
 
 from ..core import conventions
-from . import mesh_importers
+from . import mesh_copies, mesh_importers
 
 # CSM treats a point light's power / 100 W as its intensity multiplier, so 100 W is the
 # file's intensity of one.
@@ -112,19 +112,22 @@ def corners_in_parent(parent, objects):
 def placed_bounds(planned, corners_by_file):
     """World (min, max) of every scene object's mesh, from its file's corners and its
     transform: numpy over the file's transforms, not Blender over every object."""
-    points = []
+    lows, highs = [], []
+    by_file = {}
     for item in planned:
-        corners = corners_by_file[item.mesh_path]
+        by_file.setdefault(item.mesh_path, []).append(item.scene_object)
+    for mesh_path, scene_objects in by_file.items():
+        corners = corners_by_file[mesh_path]
         if not len(corners):
             continue
-        o = item.scene_object
-        matrix = conventions.object_matrix_zup(o.translate.as_tuple(), o.rotate.as_tuple(),
-                                               o.scale.as_tuple())
-        points.append(corners @ matrix[:3, :3].T + matrix[:3, 3])
-    if not points:
+        matrices = mesh_copies.placement_matrices(scene_objects)
+        points = np.einsum("nij,kj->nki", matrices[:, :3, :3], corners) + \
+            matrices[:, None, :3, 3]
+        lows.append(points.min(axis=(0, 1)))
+        highs.append(points.max(axis=(0, 1)))
+    if not lows:
         return None
-    points = np.concatenate(points)
-    return points.min(axis=0), points.max(axis=0)
+    return np.min(lows, axis=0), np.max(highs, axis=0)
 
 
 def _mesh_bounds(objects, space_from_world=None):

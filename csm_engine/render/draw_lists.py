@@ -49,7 +49,7 @@ class InstanceArrays:
         # Negative scale turns a triangle's winding around: back-face culling of a mirrored
         # instance culls its front-wound faces.
         self.mirrored = np.linalg.det(world_from_objects[:, :3, :3]) < 0.0
-        self.bounds_lo_hi = instance_bounds(snap.instances, cache.meshes)
+        self.bounds_lo_hi = _instance_bounds(snap, cache, meshes, world_from_objects)
         # Checked once here, not again for every cascade's culling (``shadow_atlas``).
         self.bounds_checked = self.bounds_lo_hi is not None and \
             cascades.boxes_are_valid(*self.bounds_lo_hi)
@@ -69,6 +69,24 @@ class InstanceArrays:
         if self.bounds_lo_hi is None:
             return None
         return self.bounds_lo_hi[0].min(axis=0), self.bounds_lo_hi[1].max(axis=0)
+
+
+def _instance_bounds(snap, cache, meshes, world_from_objects):
+    """``shadow_plan.instance_bounds`` with the frame's matrices and each mesh's box
+    looked up once per mesh, not once per copy; the same arithmetic, so the same bounds."""
+    if not meshes or any(mesh is None for mesh in meshes):
+        return instance_bounds(snap.instances, cache.meshes)
+    numbers = {}
+    which = np.fromiter((numbers.setdefault(id(mesh), len(numbers)) for mesh in meshes),
+                        dtype=np.int64, count=len(meshes))
+    unique = {id(mesh): mesh for mesh in meshes}
+    lo = np.stack([unique[key].aabb_min for key in numbers])[which]
+    hi = np.stack([unique[key].aabb_max for key in numbers])[which]
+    pick = np.array([[(c >> a) & 1 for a in range(3)] for c in range(8)], dtype=bool)
+    corners = np.where(pick[None], hi[:, None, :], lo[:, None, :])      # (N,8,3)
+    world = np.einsum("nij,nkj->nki", world_from_objects[:, :3, :3], corners) + \
+        world_from_objects[:, None, :3, 3]
+    return world.min(axis=1), world.max(axis=1)
 
 
 # The G-buffer programs' material samplers, in DrawMaterial.textures order.

@@ -225,21 +225,22 @@ def gbuffer_contents(targets, snap, cache, lists, order, world_from_objects,
     if not targets.records or \
             (snap.is_viewport and (held is None or held.contents.camera != camera)):
         return GBufferContents(camera)
-    per_entry = {}
-    draws = []
+    # Instances of one group share their draws: each group's inputs once, then which group
+    # each drawn instance is.
+    groups = lists.groups[order]
+    unique, first = np.unique(groups, return_index=True)
+    per_group = []
     instances = snap.instances
     items = lists.items
-    for index in order.tolist():
+    for index in order[first].tolist():
         entry = items[index]
-        known = per_entry.get(id(entry))
-        if known is None:
-            mesh = cache.meshes.get(instances[index].key)
-            keys = tuple(material.gbuffer_key for _batch, material in
-                         entry.textured + entry.masked + entry.untextured)
-            if None in keys:
-                return None
-            known = per_entry[id(entry)] = (mesh.serial if mesh is not None else 0, keys)
-        draws.append(known)
+        mesh = cache.meshes.get(instances[index].key)
+        keys = tuple(material.gbuffer_key for _batch, material in
+                     entry.textured + entry.masked + entry.untextured)
+        if None in keys:
+            return None
+        per_group.append((mesh.serial if mesh is not None else 0, keys))
+    draws = (unique.tobytes(), tuple(per_group), groups.tobytes())
     # The facet target carries each object's Shadow Terminator Geometry Offset.
     return GBufferContents(camera, order.tobytes(), world_from_objects[order].tobytes(),
-                           tuple(draws), terminator_offsets[order].tobytes())
+                           draws, terminator_offsets[order].tobytes())
