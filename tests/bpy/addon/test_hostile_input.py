@@ -245,6 +245,7 @@ def test_many_references_to_one_file_import_once_as_copies(scene, tmp_path, coun
     print(f"scene import: replacing it: {seconds:.2f} s")
     assert seconds < allowed
     assert sorted(obj.name for obj in collection.all_objects) == names
+    assert [group.name for group in bpy.data.node_groups] == ["CSM Copies"]
 
 
 def test_mirrored_obj_and_shared_glb_keep_their_own_transforms(scene, tmp_path):
