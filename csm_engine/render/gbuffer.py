@@ -87,6 +87,8 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     order = np.asarray(front_to_back(snap, instances.bounds_lo_hi), dtype=np.int64)
     order = order[np.fromiter((i.visible_camera for i in snap.instances), dtype=bool,
                               count=len(snap.instances))[order]]
+    order = order[in_view(snap.camera.clip_from_world, instances.bounds_lo_hi, order,
+                          len(snap.instances))]
     terminator_offsets = np.fromiter((i.terminator_offset for i in snap.instances),
                                      dtype=np.float64, count=len(snap.instances))
     frame_cache = targets.frame_cache
@@ -105,6 +107,26 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     if contents is not None and targets.records:
         frame_cache.gbuffer = HeldGBuffer(drawn_into, contents)
     return gbuffer, False
+
+
+def in_view(clip_from_world, bounds_lo_hi, rows, count):
+    """Which of ``rows`` (instance indices) have a world box that may reach the view:
+    a box whose 8 corners all lie beyond one plane of the view frustum (x, y or z outside
+    -w..w in clip space) cannot draw a pixel. Only the others are drawn, and only their
+    matrices uploaded."""
+    rows = np.asarray(rows, dtype=np.int64)
+    if bounds_lo_hi is None or len(bounds_lo_hi[0]) != count or not len(rows):
+        return np.ones(len(rows), dtype=bool)
+    lo, hi = bounds_lo_hi[0][rows], bounds_lo_hi[1][rows]
+    m = np.asarray(clip_from_world, dtype=np.float64)
+    inside = np.ones(len(rows), dtype=bool)
+    for axis in range(3):
+        # x <= w and x >= -w are the planes (w - x) >= 0 and (w + x) >= 0, linear in the
+        # corner: a box's greatest value picks hi or lo per axis by the plane's sign.
+        for plane in (m[3] - m[axis], m[3] + m[axis]):
+            greatest = np.where(plane[:3] >= 0.0, hi, lo) @ plane[:3] + plane[3]
+            inside &= greatest >= 0.0
+    return inside
 
 
 def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuffer_fb,

@@ -129,3 +129,22 @@ def test_packed_matrices_read_back_as_the_shader_reads_them():
     for index in (0, 1, per_row - 1, per_row, 2499):
         row, first = index // per_row, (index % per_row) * 4
         assert np.array_equal(texels[row, first:first + 4].ravel(), matrices[index])
+
+
+def test_the_gbuffer_draws_only_boxes_that_reach_the_view():
+    from csm_engine.render.gbuffer import in_view
+    # A GL perspective camera at the origin looking down -z, 90 degrees, clip 0.1 .. 100.
+    near, far = 0.1, 100.0
+    clip_from_world = np.array([[1, 0, 0, 0], [0, 1, 0, 0],
+                                [0, 0, -(far + near) / (far - near),
+                                 -2 * far * near / (far - near)],
+                                [0, 0, -1, 0]], dtype=np.float64)
+    centres = np.array([[0, 0, -5],        # ahead
+                        [0, 0, 5],         # behind
+                        [20, 0, -5],       # far to the right of a 90-degree view
+                        [5.4, 0, -5],      # its box (half size 0.5) reaches x = z
+                        [0, 0, -150],      # beyond clip end
+                        [0, 0, 0.3]])      # around the eye, reaching past clip start
+    lo, hi = centres - 0.5, centres + 0.5
+    seen = in_view(clip_from_world, (lo, hi), np.arange(len(centres)), len(centres))
+    assert seen.tolist() == [True, False, False, True, False, True]
