@@ -260,6 +260,11 @@ def take(depsgraph, camera, is_viewport=False):
             else:
                 _add_light(snap, obj, _matrix(instance.matrix_world), light_threshold)
         elif kind in _MESH_TYPES:
+            if kind == 'MESH' and not instance.is_instance and obj.data is not None and \
+                    not len(obj.data.polygons):
+                # Nothing to draw, and no bounds to add: e.g. an object whose Geometry
+                # Nodes make only instances (the copies of a mesh file), which come next.
+                continue
             original = obj.original
             key = original.name if original else obj.name
             fields = per_object.get(key)
