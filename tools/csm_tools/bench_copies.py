@@ -8,7 +8,7 @@ D distinct files x N copies, and renders each in a fresh process from the comman
 peak resident memory), and the same import rendered by EEVEE. Results go to
 docs/benchmarks.md ("Many copies of one mesh").
 
-    python -m tools.csm_tools.bench_copies [--sizes 1000,10000,100000] [--distinct 10x10000]
+    .venv/bin/python tools/csm_tools/bench_copies.py [--sizes 1000,10000,100000] [--distinct 10x10000]
 """
 
 import argparse

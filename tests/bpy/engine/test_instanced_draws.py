@@ -148,3 +148,69 @@ def test_the_gbuffer_draws_only_boxes_that_reach_the_view():
     lo, hi = centres - 0.5, centres + 0.5
     seen = in_view(clip_from_world, (lo, hi), np.arange(len(centres)), len(centres))
     assert seen.tolist() == [True, False, False, True, False, True]
+
+
+def test_blenders_own_collection_instances_draw_instanced_with_the_same_pixels(
+        empty_scene, monkeypatch):
+    from tests.bpy.scenes import add_camera, add_ground, add_sun
+    scene = empty_scene
+    scene.render.resolution_x, scene.render.resolution_y = 160, 120
+    scene.csm.fxaa = False
+    add_ground(30.0)
+    add_sun((0.4, 0.3, -0.87))
+    add_camera(scene, (0.0, -18.0, 12.0), (0.0, 0.0, 0.0))
+    tree = bpy.data.collections.new("tree")
+    bpy.ops.mesh.primitive_cone_add(radius1=0.8, depth=2.0, location=(0, 0, 1.5))
+    bpy.ops.mesh.primitive_cylinder_add(radius=0.2, depth=1.0, location=(0, 0, 0.5))
+    for obj in list(scene.collection.objects):
+        if obj.type == 'MESH' and obj.name != "Plane":
+            scene.collection.objects.unlink(obj)
+            tree.objects.link(obj)
+    for index in range(12):
+        empty = bpy.data.objects.new(f"tree{index}", None)
+        empty.instance_type = 'COLLECTION'
+        empty.instance_collection = tree
+        empty.location = (-7.5 + 3.0 * (index % 6), -3.0 + 6.0 * (index // 6), 0.0)
+        empty.scale = (-1.0 if index % 4 == 1 else 1.0, 1.0, 0.8 + 0.1 * (index % 3))
+        scene.collection.objects.link(empty)
+    bpy.context.view_layer.update()
+    uploads = []
+    real = instancing.matrix_texture
+    monkeypatch.setattr(instancing, "matrix_texture",
+                        lambda matrices: uploads.append(len(matrices)) or real(matrices))
+    engine.forget_final_render_passes()
+    instanced = engine.render_final(scene, keep_images=True)
+    assert instanced.error is None, instanced.error
+    assert uploads and max(uploads) == 24, uploads      # 12 cones and 12 trunks
+    monkeypatch.setattr(draw_lists.HeldDrawLists, "instancing", False)
+    engine.forget_final_render_passes()
+    separate = engine.render_final(scene, keep_images=True)
+    for name in ("combined", "normal", "aux"):
+        assert np.array_equal(instanced.images[name], separate.images[name]), name
+
+
+def test_moving_one_copy_in_the_viewport_moves_it_and_uploads_no_mesh(copies_scene):
+    from csm_engine.blender import mesh_cache
+    from csm_engine.render.pipeline import Pipeline
+    from tests.bpy.bpy_helpers import viewport_frame
+    scene, collection, _objects = copies_scene
+    engine.render_final(scene)                  # a GPU context exists from here on
+    cache = mesh_cache.MeshCache()
+    handler = lambda _scene, depsgraph: engine.apply_depsgraph_updates(      # noqa: E731
+        cache, depsgraph.updates)
+    bpy.app.handlers.depsgraph_update_post.append(handler)
+    try:
+        renderer = Pipeline()
+        before = viewport_frame(scene, renderer, cache, 120, 90)
+        assert set(cache.meshes) == {"wedge", "ground"}
+        # Edit Mode's move of one vertex of the copies object: that copy moves.
+        copies = collection.objects["wedge (48 copies)"]
+        copies.data.vertices[24].co.y += 4.0
+        copies.data.update()
+        bpy.context.view_layer.update()
+        after = viewport_frame(scene, renderer, cache, 120, 90)
+        assert cache.last_sync["uploaded"] == 0
+        changed = np.abs(after[..., :3] - before[..., :3]).max(axis=-1) > 0.02
+        assert 0.002 < changed.mean() < 0.2, changed.mean()
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(handler)
