@@ -54,7 +54,7 @@ def write_scene(folder, copies, distinct=1, seed=0):
     side = int(np.ceil(np.sqrt(total)))
     spacing = 2.0
     half = side * spacing / 2.0
-    ground = write_ground_obj(os.path.join(folder, "ground.obj"), half + 2.0)
+    write_ground_obj(os.path.join(folder, "ground.obj"), half + 2.0)
     cells = np.arange(total)
     x = (cells % side) * spacing - half + spacing / 2
     z = (cells // side) * spacing - half + spacing / 2

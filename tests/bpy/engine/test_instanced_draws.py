@@ -214,3 +214,26 @@ def test_moving_one_copy_in_the_viewport_moves_it_and_uploads_no_mesh(copies_sce
         assert 0.002 < changed.mean() < 0.2, changed.mean()
     finally:
         bpy.app.handlers.depsgraph_update_post.remove(handler)
+
+
+def test_mirrored_copies_with_backface_culling_show_their_outside(copies_scene):
+    """A closed mesh seen from outside looks the same with Backface Culling on or off,
+    unless the culling takes the wrong faces: a mirrored copy's winding is turned around,
+    so culling its 'back' faces by the winding alone would show its inside."""
+    scene, _collection, _objects = copies_scene
+    material = bpy.data.materials.new("culled")
+    bpy.data.meshes["wedge"].materials.append(material)
+
+    def render(culling):
+        material.use_backface_culling = culling
+        if hasattr(material, "use_backface_culling_shadow"):
+            material.use_backface_culling_shadow = culling
+        engine.forget_final_render_passes()
+        result = engine.render_final(scene, keep_images=True)
+        assert result.error is None, result.error
+        return result.images["combined"][..., :3]
+
+    culled, both_sides = render(True), render(False)
+    differ = np.abs(culled - both_sides).max(axis=-1) > 0.02
+    # Only silhouette pixels may differ (a front and a back face meet there at one depth).
+    assert differ.mean() < 0.005, differ.mean()
