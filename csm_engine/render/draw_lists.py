@@ -30,22 +30,24 @@ def column_major_stack(matrices):
 
 class InstanceArrays:
     """Per-instance arrays of one frame, kept while the instances are the same (viewport
-    redraws that only move the view): world matrices (N, 4, 4), the same as GLSL lists,
-    which are mirrored, the world AABBs (``instance_bounds``) and, for the last sun
+    redraws that only move the view): world matrices (N, 4, 4), the same in GLSL's
+    column-major float32 (``world_from_objects_f32``, (N, 16); as lists of 16 floats:
+    ``world_from_objects_gl``, made when first asked for), which are mirrored, the world AABBs (``instance_bounds``) and, for the last sun
     rotation culled against, the boxes in its frame (``cascades.boxes_in_light_frame``),
     and the G-buffer's last texture of instanced matrices (``gbuffer_matrices``: the
     instances it holds, in order, and the texture), so an unmoved view uploads none."""
     __slots__ = ("keys", "meshes", "matrix_bytes", "world_from_objects",
-                 "world_from_objects_gl", "mirrored", "bounds_lo_hi", "bounds_checked",
+                 "world_from_objects_f32", "_world_from_objects_gl", "mirrored", "bounds_lo_hi", "bounds_checked",
                  "light_frame_boxes", "gbuffer_matrices")
 
     def __init__(self, snap, cache, keys, meshes, world_from_objects):
         self.keys, self.meshes = keys, meshes
         self.world_from_objects = world_from_objects
         self.matrix_bytes = world_from_objects.tobytes()
-        # (N, 16) float32: a row's tolist() is a draw's push constant, rows of it the
-        # instanced draws' texture.
-        self.world_from_objects_gl = column_major_f32(world_from_objects)
+        # A row's tolist() is a draw's push constant, rows of it the instanced draws'
+        # texture.
+        self.world_from_objects_f32 = column_major_f32(world_from_objects)
+        self._world_from_objects_gl = None
         # Negative scale turns a triangle's winding around: back-face culling of a mirrored
         # instance culls its front-wound faces.
         self.mirrored = np.linalg.det(world_from_objects[:, :3, :3]) < 0.0
@@ -55,6 +57,13 @@ class InstanceArrays:
             cascades.boxes_are_valid(*self.bounds_lo_hi)
         self.light_frame_boxes = (None, None)     # (rotation bytes, boxes in its frame)
         self.gbuffer_matrices = (None, None)      # (instance rows' bytes, texture)
+
+    @property
+    def world_from_objects_gl(self):
+        """The world matrices as N lists of 16 floats (GLSL's column-major order)."""
+        if self._world_from_objects_gl is None:
+            self._world_from_objects_gl = self.world_from_objects_f32.tolist()
+        return self._world_from_objects_gl
 
     def holds(self, keys, meshes, world_from_objects):
         """Whether these arrays are those of ``keys`` drawn with ``meshes`` (GPUMesh or

@@ -161,7 +161,7 @@ def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuff
                 else:
                     shader = state.use(program, False, frame_ubo)
                     shader.uniform_float("world_from_object",
-                                         instances.world_from_objects_gl[index].tolist())
+                                         instances.world_from_objects_f32[index].tolist())
                 # Most objects share Blender's default: set only when it changes.
                 if terminator_offsets[index] != state.offset:
                     state.offset = terminator_offsets[index]
@@ -227,7 +227,7 @@ def _instanced_matrices(instances, per_program):
     held = instances.gbuffer_matrices
     if held[0] == key:
         return held[1]
-    texture = instancing.matrix_texture(instances.world_from_objects_gl[rows])
+    texture = instancing.matrix_texture(instances.world_from_objects_f32[rows])
     instances.gbuffer_matrices = (key, texture)
     return texture
 
