@@ -47,3 +47,17 @@ def test_the_outliner_shows_the_copies_object_and_an_excluded_source(scene, tmp_
     assert layer.children[source.name].exclude
     # The copies object is what the import selects and makes active.
     assert bpy.context.view_layer.objects.active.name == "box (3 copies)"
+
+
+def test_replace_current_scene_keeps_the_new_copies_and_their_source(scene, tmp_path):
+    box = write_box_obj(str(tmp_path / "box.obj"), (-1, 0, -1), (1, 1, 1))
+    path = write_scene(str(tmp_path), "two.json", {"objects": [
+        {"mesh": box}, {"mesh": box, "translate": {"x": 3, "y": 0, "z": 0}}]})
+    for _ in range(2):
+        collection = scene_builder.import_scene_file(path, scene, replace=True)
+        assert sorted(obj.name for obj in collection.all_objects) == sorted(
+            ["box (2 copies)", "box", "box (source)", "Camera (default view)"])
+        assert [group.name for group in bpy.data.node_groups] == ["CSM Copies"]
+        depsgraph = bpy.context.evaluated_depsgraph_get()
+        assert sum(1 for i in depsgraph.object_instances
+                   if i.is_instance and i.object.type == 'MESH') == 2
