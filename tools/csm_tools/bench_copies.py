@@ -101,7 +101,10 @@ def _eevee_engine():
 
 
 def timed(command, env=None):
-    """Run ``command`` under /usr/bin/time -v: (wall seconds, peak RSS in MB, output)."""
+    """Run ``command`` under /usr/bin/time -v: (wall seconds, peak RSS in MB, output).
+    Without /usr/bin/time, the child's own resource usage (``os.wait4``) gives the peak."""
+    if not os.path.exists("/usr/bin/time"):
+        return _timed_by_wait4(command, env)
     start = time.perf_counter()
     done = subprocess.run(["/usr/bin/time", "-v", *command], capture_output=True,
                           text=True, env=env)
@@ -110,6 +113,21 @@ def timed(command, env=None):
         raise RuntimeError(f"{command} failed:\n{done.stdout[-2000:]}\n{done.stderr[-2000:]}")
     peak = re.search(r"Maximum resident set size \(kbytes\): (\d+)", done.stderr)
     return wall, int(peak.group(1)) / 1024.0 if peak else float("nan"), done.stdout
+
+
+def _timed_by_wait4(command, env=None):
+    start = time.perf_counter()
+    with tempfile.TemporaryFile("w+") as out:
+        child = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT, text=True,
+                                 env=env)
+        _pid, status, usage = os.wait4(child.pid, 0)
+        child.returncode = os.waitstatus_to_exitcode(status)
+        wall = time.perf_counter() - start
+        out.seek(0)
+        text = out.read()
+    if child.returncode:
+        raise RuntimeError(f"{command} failed:\n{text[-3000:]}")
+    return wall, usage.ru_maxrss / 1024.0, text
 
 
 def run(sizes, distinct, folder, with_eevee=True):
