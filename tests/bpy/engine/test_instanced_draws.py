@@ -237,3 +237,39 @@ def test_mirrored_copies_with_backface_culling_show_their_outside(copies_scene):
     differ = np.abs(culled - both_sides).max(axis=-1) > 0.02
     # Only silhouette pixels may differ (a front and a back face meet there at one depth).
     assert differ.mean() < 0.005, differ.mean()
+
+
+def _instances_bvh():
+    """One BVH of every mesh triangle the depsgraph draws, instances included."""
+    from mathutils.bvhtree import BVHTree
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    verts, polys = [], []
+    for instance in depsgraph.object_instances:
+        obj = instance.object
+        if obj.type != 'MESH':
+            continue
+        mesh = obj.data
+        mesh.calc_loop_triangles()
+        matrix = instance.matrix_world.copy()
+        base = len(verts)
+        verts += [matrix @ v.co for v in mesh.vertices]
+        polys += [[base + i for i in tri.vertices] for tri in mesh.loop_triangles]
+    return BVHTree.FromPolygons(verts, polys)
+
+
+def test_instanced_copies_cast_the_shadows_a_ray_cast_finds(copies_scene):
+    from tests.bpy.bpy_helpers import render_scene
+    from tests.bpy.scenes import ray_cast_shadowed, sun_facing_points
+    scene, _collection, _objects = copies_scene
+    scene.csm.fxaa = False
+    engine.forget_final_render_passes()
+    images = render_scene(scene, 320, 240)
+    sun = next(obj for obj in scene.objects if obj.type == 'LIGHT')
+    to_light = np.array(sun.matrix_world.col[2][:3])
+    rows, cols, points, normals = sun_facing_points(images, to_light)
+    expected = ray_cast_shadowed(_instances_bvh(), points, normals, to_light)
+    assert len(points) > 5000
+    assert 0.05 < expected.mean() < 0.7, "the view must show both shadow and light"
+    csm_shadowed = images["aux"][rows, cols, 0] < 0.5
+    mismatch = np.mean(csm_shadowed != expected)
+    assert mismatch < 0.02, f"{mismatch:.2%} of sun-facing pixels disagree with the ray cast"
