@@ -1,6 +1,11 @@
 /* G-buffer pass, vertex stage: world normal (and tangent), UV and view depth per corner. */
+#include "instance_matrix.glsl"
+
 void main()
 {
+#ifdef INSTANCED
+  mat4 world_from_object = instance_matrix();
+#endif
   vec4 world = world_from_object * vec4(pos, 1.0);
   /* Inverse transpose keeps normals perpendicular under non-uniform scale (pillars are
    * scaled (1,3,1) in the course's shadow test). */

@@ -6,7 +6,8 @@ memory copy) and through the older per-element paths before; corner normals (4.1
 the Principled BSDF's renamed specular and emission inputs; material alpha, shadow and
 culling settings (``blend_method``/``shadow_method`` up to 4.1, ``surface_render_method``/
 ``use_transparent_shadow`` from 4.2); MikkTSpace tangents; the glTF importer of 3.4/3.5 that needs
-``np.bool``; an object's Shadow Terminator Geometry Offset (Object in 5.0, the Cycles
+``np.bool``; node groups' sockets (``interface`` from 4.0); an object's Shadow Terminator
+Geometry Offset (Object in 5.0, the Cycles
 add-on's ``object.cycles`` before); and the exit that pip bpy 4.2 needs to keep a
 process's exit code. Callers ask
 for what they need and never test versions themselves.
@@ -186,6 +187,16 @@ def triangle_material_indices(mesh, tri_count):
 
 
 # -- render results -----------------------------------------------------------------------
+def new_node_group_socket(tree, name, in_out, socket_type):
+    """A node group's input or output socket: ``tree.interface`` in 4.0+, ``tree.inputs``
+    and ``tree.outputs`` before."""
+    interface = getattr(tree, "interface", None)
+    if interface is not None:
+        return interface.new_socket(name, in_out=in_out, socket_type=socket_type)
+    sockets = tree.inputs if in_out == 'INPUT' else tree.outputs
+    return sockets.new(socket_type, name)
+
+
 def write_pass(render_pass, pixels):
     """Copy an (H, W, C) float32 array into a RenderResult pass."""
     flat = np.ascontiguousarray(pixels, dtype=np.float32).reshape(-1, render_pass.channels)

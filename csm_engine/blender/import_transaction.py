@@ -191,6 +191,11 @@ def _used_data(objects):
     data = [obj.data for obj in objects if obj.data is not None]
     materials, node_groups, images = [], [], []
     for obj in objects:
+        # A Geometry Nodes modifier's group (the copies of a mesh file, ``mesh_copies``).
+        for modifier in obj.modifiers:
+            group = getattr(modifier, "node_group", None)
+            if group is not None and group not in node_groups:
+                node_groups.append(group)
         for slot in obj.material_slots:
             if slot.material is not None and slot.material not in materials:
                 materials.append(slot.material)

@@ -201,14 +201,21 @@ def plan(scene_path, description, cwd, extra_folders=()):
     planned = []
     importers = {}
     checked = set()
+    resolved = {}       # the file's mesh string -> its checked path
     for index, scene_object in enumerate(description.objects):
         json_path = f"objects[{index}].mesh"
-        try:
-            mesh_path = scene_format.resolve_mesh_path(scene_object.mesh, scene_path, cwd,
-                                                       json_path=json_path)
-        except scene_format.SceneFormatError as err:
-            raise SceneImportError(str(err)) from None
-        _confine_mesh_path(scene_object.mesh, mesh_path, scene_path, cwd, folders, json_path)
+        # Objects naming one file the same way resolve the same (100,000 references to
+        # one mesh: 15 s of path resolution when each was resolved again).
+        mesh_path = resolved.get(scene_object.mesh)
+        if mesh_path is None:
+            try:
+                mesh_path = scene_format.resolve_mesh_path(scene_object.mesh, scene_path, cwd,
+                                                           json_path=json_path)
+            except scene_format.SceneFormatError as err:
+                raise SceneImportError(str(err)) from None
+            _confine_mesh_path(scene_object.mesh, mesh_path, scene_path, cwd, folders,
+                               json_path)
+            resolved[scene_object.mesh] = mesh_path
         extension = os.path.splitext(mesh_path)[1].lower()
         if extension not in importers:
             importers[extension] = _find_importer(extension)

@@ -2,8 +2,8 @@
 
 Owns one builder per kind of object, in the file's units and Blender's Z-up frame
 (``core/conventions.py``): a mesh file's objects under an empty carrying the scene
-object's transform (``add_mesh_file``) and linked copies of them for further references to
-the same file (``add_linked_copy``); the sun (``add_sun``), point lights
+object's transform, or at the origin as the source of ``mesh_copies`` (``add_mesh_file``);
+the sun (``add_sun``), point lights
 (``add_point_light``), the file's camera or a default view of the whole scene
 (``add_camera``, ``add_default_camera``) and a sky World for scenes without one or being
 replaced (``ensure_world``); and the scene's bounds the sun and default camera are placed
@@ -19,7 +19,7 @@ import mathutils
 import numpy as np
 
 from ..core import conventions
-from . import mesh_importers
+from . import mesh_copies, mesh_importers
 
 # CSM treats a point light's power / 100 W as its intensity multiplier, so 100 W is the
 # file's intensity of one.
@@ -48,32 +48,42 @@ def _link_only_to(obj, collection):
             other.objects.unlink(obj)
 
 
-def _new_parent(planned, collection=None):
+def mesh_stem(planned):
+    """The mesh file's name without its extension, which names what is built from it."""
+    return os.path.splitext(os.path.basename(planned.mesh_path))[0]
+
+
+def _new_parent(planned, collection=None, placed=True):
     """The empty carrying one scene object's transform; the file's objects hang below it.
 
     Linked to ``collection`` when given; copies are linked all together later (linking
-    one by one between other edits makes Blender resync the view layer each time)."""
+    one by one between other edits makes Blender resync the view layer each time).
+    Not ``placed``: the empty stays at the origin (a source for ``mesh_copies``)."""
     item = planned.scene_object
-    stem = os.path.splitext(os.path.basename(planned.mesh_path))[0]
+    stem = mesh_stem(planned)
     # Named apart from the importer's objects, which often carry the file's name too.
-    parent = bpy.data.objects.new(f"{stem} (scene object {planned.index})", None)
+    parent = bpy.data.objects.new(
+        f"{stem} (scene object {planned.index})" if placed else f"{stem} (source)", None)
     parent.empty_display_type = 'PLAIN_AXES'
     if collection is not None:
         collection.objects.link(parent)
+    parent["csm_mesh"] = planned.mesh_path
+    if not placed:
+        return parent
     location, rotation_mode, euler, scale = conventions.blender_object_transform_zup(
         item.translate, item.rotate, item.scale)
     parent.location = location
     parent.rotation_mode = rotation_mode
     parent.rotation_euler = euler
     parent.scale = scale
-    parent["csm_mesh"] = planned.mesh_path
     return parent
 
 
-def add_mesh_file(planned, collection, scene_path):
+def add_mesh_file(planned, collection, scene_path, placed=True):
     """Import one mesh file into ``collection`` below a new parent empty carrying the scene
-    object's transform; return the parent and the file's objects."""
-    parent = _new_parent(planned, collection)
+    object's transform (not ``placed``: at the origin); return the parent and the file's
+    objects."""
+    parent = _new_parent(planned, collection, placed)
     new_objects = mesh_importers.import_objects(planned, scene_path)
     for obj in new_objects:
         _link_only_to(obj, collection)
@@ -86,33 +96,6 @@ def add_mesh_file(planned, collection, scene_path):
             obj.matrix_parent_inverse = mathutils.Matrix.Identity(4)
             obj.matrix_basis = basis
     return parent, new_objects
-
-
-def add_linked_copy(planned, first_parent, first_objects, unlinked):
-    """A further reference to a file already imported: linked copies of its objects.
-
-    NOTE: running the importer again per reference costs a view-layer update over the whole
-    scene each time (quadratic: 3,000 references took 23 minutes); copies share the mesh
-    data, so N references cost one import plus N cheap object copies. The new objects are
-    appended to ``unlinked``, for the caller to link in one go.
-    """
-    parent = _new_parent(planned)
-    unlinked.append(parent)
-    copies = {first_parent.as_pointer(): parent}
-    for obj in first_objects:
-        copies[obj.as_pointer()] = obj.copy()      # shares obj.data: a linked duplicate
-    for obj in first_objects:
-        copy = copies[obj.as_pointer()]
-        unlinked.append(copy)
-        if obj.parent is not None:
-            matrix_parent_inverse = obj.matrix_parent_inverse.copy()
-            copy.parent = copies.get(obj.parent.as_pointer(), obj.parent)
-            copy.matrix_parent_inverse = matrix_parent_inverse
-        for modifier in copy.modifiers:            # e.g. an armature of the file's skin
-            target = getattr(modifier, "object", None)
-            if target is not None and target.as_pointer() in copies:
-                modifier.object = copies[target.as_pointer()]
-    return parent
 
 
 def corners_in_parent(parent, objects):
@@ -129,19 +112,22 @@ def corners_in_parent(parent, objects):
 def placed_bounds(planned, corners_by_file):
     """World (min, max) of every scene object's mesh, from its file's corners and its
     transform: numpy over the file's transforms, not Blender over every object."""
-    points = []
+    lows, highs = [], []
+    by_file = {}
     for item in planned:
-        corners = corners_by_file[item.mesh_path]
+        by_file.setdefault(item.mesh_path, []).append(item.scene_object)
+    for mesh_path, scene_objects in by_file.items():
+        corners = corners_by_file[mesh_path]
         if not len(corners):
             continue
-        o = item.scene_object
-        matrix = conventions.object_matrix_zup(o.translate.as_tuple(), o.rotate.as_tuple(),
-                                               o.scale.as_tuple())
-        points.append(corners @ matrix[:3, :3].T + matrix[:3, 3])
-    if not points:
+        matrices = mesh_copies.placement_matrices(scene_objects)
+        points = np.einsum("nij,kj->nki", matrices[:, :3, :3], corners) + \
+            matrices[:, None, :3, 3]
+        lows.append(points.min(axis=(0, 1)))
+        highs.append(points.max(axis=(0, 1)))
+    if not lows:
         return None
-    points = np.concatenate(points)
-    return points.min(axis=0), points.max(axis=0)
+    return np.min(lows, axis=0), np.max(highs, axis=0)
 
 
 def _mesh_bounds(objects, space_from_world=None):

@@ -17,8 +17,10 @@ preferences) is put back after every import, failed or not. Every failure is one
 ``SceneImportError`` with a one-line message; importers' own output (progress, tracebacks)
 is captured and shown only with ``CSM_DEBUG`` set.
 
-Each distinct mesh file is imported once; further references to it get linked copies
-(objects sharing its mesh data), each under its own transform.
+Each distinct mesh file is imported once. A file the scene references once becomes its
+objects under an empty carrying the scene object's transform; a file referenced several
+times becomes one copies object instancing the file's objects at every reference
+(``mesh_copies``): one mesh, however many copies.
 
 Re-importing a file replaces its previous import, but only once the new import has
 succeeded. "Replace current scene" (``replace=True``) empties the scene the way File > New
@@ -26,6 +28,7 @@ starts one (``import_transaction.clear_scene``), also only once the new import h
 succeeded, so a failed import leaves the old scene exactly as it was.
 """
 
+import collections
 import contextlib
 import os
 
@@ -33,7 +36,7 @@ import bpy
 import numpy as np
 
 from ..core import conventions, scene_format
-from . import mesh_importers, object_builders, preferences
+from . import mesh_copies, mesh_importers, object_builders, preferences
 from .import_transaction import (OutsideChanges, SceneImportError, SceneState,
                                  clear_scene, created_since, data_snapshot, layer_collection_for,
                                  one_line, remove_datablocks, remove_import,
@@ -73,21 +76,29 @@ def _build(description, planned, scene, view_layer, scene_path, name, replace=Fa
         obj.select_set(False, view_layer=view_layer)
 
     parents = []
-    imported = {}       # mesh path -> (parent, objects) of its first, real import
     corners_by_file = {}
-    unlinked = []
+    references = collections.Counter(item.mesh_path for item in planned)
+    copies = {}         # mesh path -> (source collection, its scene objects)
     for item in planned:
-        first = imported.get(item.mesh_path)
-        if first is None:
-            parent, objects = object_builders.add_mesh_file(item, collection, scene_path)
-            imported[item.mesh_path] = (parent, objects)
-            view_layer.update()     # while the scene is small: only for distinct files
-            corners_by_file[item.mesh_path] = object_builders.corners_in_parent(parent, objects)
-        else:
-            parent = object_builders.add_linked_copy(item, first[0], first[1], unlinked)
-        parents.append(parent)
-    for obj in unlinked:
-        collection.objects.link(obj)
+        if item.mesh_path in corners_by_file:
+            copies[item.mesh_path][1].append(item)
+            continue
+        into = collection
+        if references[item.mesh_path] > 1:
+            into = bpy.data.collections.new(f"{object_builders.mesh_stem(item)} (source)")
+            collection.children.link(into)
+            copies[item.mesh_path] = (into, [item])
+        parent, objects = object_builders.add_mesh_file(item, into, scene_path,
+                                                        placed=into is collection)
+        view_layer.update()     # while the scene is small: only for distinct files
+        corners_by_file[item.mesh_path] = object_builders.corners_in_parent(parent, objects)
+        if into is collection:
+            parents.append(parent)
+    for source, items in copies.values():
+        mesh_copies.exclude_from_view_layers(scene, source)
+        parents.append(mesh_copies.add_copies(
+            items, source, collection,
+            f"{object_builders.mesh_stem(items[0])} ({len(items)} copies)"))
     bounds = object_builders.placed_bounds(planned, corners_by_file)
     if bounds is None:
         bounds = (np.full(3, -1.0), np.full(3, 1.0))
@@ -106,7 +117,8 @@ def _build(description, planned, scene, view_layer, scene_path, name, replace=Fa
     object_builders.ensure_world(scene, replace=replace)
 
     in_layer = {obj.as_pointer() for obj in view_layer.objects}
-    for obj in collection.all_objects:
+    # Not the source collections' objects: they are out of the view layer.
+    for obj in collection.objects:
         if obj.as_pointer() in in_layer:
             obj.select_set(True, view_layer=view_layer)
     view_layer.objects.active = parents[0] if parents else camera

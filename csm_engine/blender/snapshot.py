@@ -8,6 +8,8 @@ matrices. After ``take()`` returns, nothing downstream reads ``bpy`` properties 
 evaluated objects in ``mesh_sources`` are only handed to the mesh cache for extraction).
 """
 
+import itertools
+
 import numpy as np
 
 from . import compat
@@ -242,6 +244,10 @@ def take(depsgraph, camera, is_viewport=False):
     instances = snap.instances
     mesh_sources = snap.mesh_sources
     check_shown = None      # whether instances have show_self (asked once, not per object)
+    # Per object: its MeshInstance fields besides the matrix. Copies of one object
+    # (instances) share them, so 100,000 copies ask Blender once, not 100,000 times.
+    per_object = {}
+    rows = []               # per mesh instance: its per_object fields, in order
     for instance in depsgraph.object_instances:
         if is_viewport:
             if check_shown is None:
@@ -257,15 +263,23 @@ def take(depsgraph, camera, is_viewport=False):
             else:
                 _add_light(snap, obj, _matrix(instance.matrix_world), light_threshold)
         elif kind in _MESH_TYPES:
+            if kind == 'MESH' and not instance.is_instance and obj.data is not None and \
+                    not len(obj.data.polygons):
+                # Nothing to draw, and no bounds to add: e.g. an object whose Geometry
+                # Nodes make only instances (the copies of a mesh file), which come next.
+                continue
             original = obj.original
             key = original.name if original else obj.name
-            # Blender 3.0+ per-object ray visibility, as EEVEE and Cycles honour it: hidden
-            # from the camera but still casting, or seen but casting no shadow.
-            instances.append(MeshInstance(
-                key, None,
-                visible_camera=bool(getattr(obj, "visible_camera", True)),
-                casts_shadow=bool(getattr(obj, "visible_shadow", True)),
-                terminator_offset=compat.terminator_geometry_offset(obj)))
+            fields = per_object.get(key)
+            if fields is None:
+                # Blender 3.0+ per-object ray visibility, as EEVEE and Cycles honour it:
+                # hidden from the camera but still casting, or seen but casting no shadow.
+                # (key, visible_camera, casts_shadow, terminator_offset)
+                fields = per_object[key] = (
+                    key, bool(getattr(obj, "visible_camera", True)),
+                    bool(getattr(obj, "visible_shadow", True)),
+                    compat.terminator_geometry_offset(obj))
+            rows.append(fields)
             # A copy: the instance (and a Matrix that wraps it) is reused by the iterator.
             matrices.append(instance.matrix_world.copy())
             if key not in mesh_sources:
@@ -277,9 +291,12 @@ def take(depsgraph, camera, is_viewport=False):
         obj, world_from_light = suns[0] if len(suns) == 1 else _active_sun(depsgraph, suns)
         _add_light(snap, obj, world_from_light, light_threshold)
     # One conversion for every instance (one Matrix at a time costs twice as much).
-    for mesh_instance, matrix in zip(snap.instances,
-                                     np.array(matrices, dtype=np.float64).reshape(-1, 4, 4)):
-        mesh_instance.world_from_object = matrix
+    world_from_objects = np.fromiter(
+        itertools.chain.from_iterable(itertools.chain.from_iterable(matrices)),
+        dtype=np.float64, count=16 * len(matrices)).reshape(-1, 4, 4)
+    instances.extend(MeshInstance(key, matrix, visible_camera, casts_shadow, offset)
+                     for (key, visible_camera, casts_shadow, offset), matrix
+                     in zip(rows, world_from_objects))
     # Shadow-casting point lights first: the plan gives the first ones cube maps, and the
     # lighting pass loops over them apart from the rest (a stable sort keeps their order).
     snap.points.sort(key=lambda light: not light.casts_shadow)

@@ -16,6 +16,7 @@ from ..core import cascades
 from ..core.material_layout import pack_material
 from ..core.shadow_plan import instance_bounds
 from .gpu_mesh import MaterialInfo
+from .instancing import available, column_major_f32
 
 
 def column_major(matrix):
@@ -24,32 +25,45 @@ def column_major(matrix):
 
 def column_major_stack(matrices):
     """(N, 4, 4) matrices -> N lists of 16 floats in GLSL's column-major order."""
-    matrices = np.asarray(matrices, dtype=np.float32)
-    return matrices.transpose(0, 2, 1).reshape(len(matrices), 16).tolist()
+    return column_major_f32(matrices).tolist()
 
 
 class InstanceArrays:
     """Per-instance arrays of one frame, kept while the instances are the same (viewport
-    redraws that only move the view): world matrices (N, 4, 4), the same as GLSL lists,
-    which are mirrored, the world AABBs (``instance_bounds``) and, for the last sun
-    rotation culled against, the boxes in its frame (``cascades.boxes_in_light_frame``)."""
+    redraws that only move the view): world matrices (N, 4, 4), the same in GLSL's
+    column-major float32 (``world_from_objects_f32``, (N, 16); as lists of 16 floats:
+    ``world_from_objects_gl``, made when first asked for), which are mirrored, the world AABBs (``instance_bounds``) and, for the last sun
+    rotation culled against, the boxes in its frame (``cascades.boxes_in_light_frame``),
+    and the G-buffer's last texture of instanced matrices (``gbuffer_matrices``: the
+    instances it holds, in order, and the texture), so an unmoved view uploads none."""
     __slots__ = ("keys", "meshes", "matrix_bytes", "world_from_objects",
-                 "world_from_objects_gl", "mirrored", "bounds_lo_hi", "bounds_checked",
-                 "light_frame_boxes")
+                 "world_from_objects_f32", "_world_from_objects_gl", "mirrored", "bounds_lo_hi", "bounds_checked",
+                 "light_frame_boxes", "gbuffer_matrices")
 
     def __init__(self, snap, cache, keys, meshes, world_from_objects):
         self.keys, self.meshes = keys, meshes
         self.world_from_objects = world_from_objects
         self.matrix_bytes = world_from_objects.tobytes()
-        self.world_from_objects_gl = column_major_stack(world_from_objects)
+        # A row's tolist() is a draw's push constant, rows of it the instanced draws'
+        # texture.
+        self.world_from_objects_f32 = column_major_f32(world_from_objects)
+        self._world_from_objects_gl = None
         # Negative scale turns a triangle's winding around: back-face culling of a mirrored
         # instance culls its front-wound faces.
         self.mirrored = np.linalg.det(world_from_objects[:, :3, :3]) < 0.0
-        self.bounds_lo_hi = instance_bounds(snap.instances, cache.meshes)
+        self.bounds_lo_hi = _instance_bounds(snap, cache, meshes, world_from_objects)
         # Checked once here, not again for every cascade's culling (``shadow_atlas``).
         self.bounds_checked = self.bounds_lo_hi is not None and \
             cascades.boxes_are_valid(*self.bounds_lo_hi)
         self.light_frame_boxes = (None, None)     # (rotation bytes, boxes in its frame)
+        self.gbuffer_matrices = (None, None)      # (instance rows' bytes, texture)
+
+    @property
+    def world_from_objects_gl(self):
+        """The world matrices as N lists of 16 floats (GLSL's column-major order)."""
+        if self._world_from_objects_gl is None:
+            self._world_from_objects_gl = self.world_from_objects_f32.tolist()
+        return self._world_from_objects_gl
 
     def holds(self, keys, meshes, world_from_objects):
         """Whether these arrays are those of ``keys`` drawn with ``meshes`` (GPUMesh or
@@ -64,6 +78,24 @@ class InstanceArrays:
         if self.bounds_lo_hi is None:
             return None
         return self.bounds_lo_hi[0].min(axis=0), self.bounds_lo_hi[1].max(axis=0)
+
+
+def _instance_bounds(snap, cache, meshes, world_from_objects):
+    """``shadow_plan.instance_bounds`` with the frame's matrices and each mesh's box
+    looked up once per mesh, not once per copy; the same arithmetic, so the same bounds."""
+    if not meshes or any(mesh is None for mesh in meshes):
+        return instance_bounds(snap.instances, cache.meshes)
+    numbers = {}
+    which = np.fromiter((numbers.setdefault(id(mesh), len(numbers)) for mesh in meshes),
+                        dtype=np.int64, count=len(meshes))
+    unique = {id(mesh): mesh for mesh in meshes}
+    lo = np.stack([unique[key].aabb_min for key in numbers])[which]
+    hi = np.stack([unique[key].aabb_max for key in numbers])[which]
+    pick = np.array([[(c >> a) & 1 for a in range(3)] for c in range(8)], dtype=bool)
+    corners = np.where(pick[None], hi[:, None, :], lo[:, None, :])      # (N,8,3)
+    world = np.einsum("nij,nkj->nki", world_from_objects[:, :3, :3], corners) + \
+        world_from_objects[:, None, :3, 3]
+    return world.min(axis=1), world.max(axis=1)
 
 
 # The G-buffer programs' material samplers, in DrawMaterial.textures order.
@@ -148,12 +180,19 @@ def _writes_emission(items):
 class DrawLists:
     """What the passes derive from one frame's ``MeshDraws`` per instance (``items``), kept
     with them: the same items give the same answers. Per instance: whether each of
-    GBUFFER_PROGRAMS and each shadow program (opaque, alpha-masked) draws it."""
+    GBUFFER_PROGRAMS and each shadow program (opaque, alpha-masked) draws it, and which
+    ``MeshDraws`` it shares with other instances (``groups``: an int per instance, the
+    same for instances drawn by the same batches and materials). ``instancing``: the
+    passes draw a group's copies in one instanced draw (``render/instancing.py``)."""
     __slots__ = ("items", "writes_emission", "gbuffer_masks", "shadow_masks", "partial_mask",
-                 "signatures")
+                 "signatures", "groups", "instancing")
 
-    def __init__(self, items):
+    def __init__(self, items, instancing=True):
         self.items = items
+        self.instancing = instancing
+        numbers = {}
+        self.groups = np.fromiter((numbers.setdefault(id(entry), len(numbers))
+                                   for entry in items), dtype=np.int64, count=len(items))
         self.writes_emission = _writes_emission(items)
         self.gbuffer_masks = tuple(
             np.array([bool(getattr(entry, program.draws)) and
@@ -184,7 +223,13 @@ def _same_textures(cache, textures):
 
 class HeldDrawLists:
     """One view's draw lists and instance arrays, kept from the frame before while they
-    would come out the same."""
+    would come out the same.
+
+    ``instancing``: whether copies of a mesh draw in one instanced draw per pass (where
+    Blender can, ``instancing.available``); tests turn it off to compare with one draw per
+    object."""
+
+    instancing = True
 
     def __init__(self):
         self._instances = None      # InstanceArrays of the last frame
@@ -213,8 +258,10 @@ class HeldDrawLists:
     def lists(self, snap, cache, white):
         """This frame's ``DrawLists`` (``white``: the texture for slots without an image)."""
         items = self._kept_draw_items(snap, cache, white)
-        if self._lists is None or self._lists.items is not items:
-            self._lists = DrawLists(items)
+        instancing = bool(self.instancing) and available()
+        if self._lists is None or self._lists.items is not items or \
+                self._lists.instancing != instancing:
+            self._lists = DrawLists(items, instancing)
         return self._lists
 
     def caster_signatures(self, snap, cache, lists):
@@ -275,16 +322,26 @@ class HeldDrawLists:
 
 
 def _draw_items(snap, cache, white, default_material):
-    """Per instance, its mesh's ``MeshDraws``. Instances of one mesh share them, and slots
-    of one material share its ``DrawMaterial`` (so the G-buffer binds a material shared by
-    many objects once)."""
+    """Per instance, its mesh's ``MeshDraws``. Instances of one mesh share them (also
+    objects of their own whose meshes were uploaded once, e.g. linked duplicates: the same
+    upload and the same materials), and slots of one material share its ``DrawMaterial``
+    (so the G-buffer binds a material shared by many objects once)."""
+    per_key = {}
     per_mesh = {}
     per_material = {}
     items = []
     for instance in snap.instances:
-        entry = per_mesh.get(instance.key)
+        entry = per_key.get(instance.key)
         if entry is None:
             mesh = cache.meshes.get(instance.key)
+            # The same upload drawn with the same MaterialInfo objects draws the same.
+            shared = None if mesh is None else \
+                (mesh.serial, tuple(map(id, mesh.materials)))
+            entry = per_mesh.get(shared) if shared is not None else None
+            if entry is not None:
+                per_key[instance.key] = entry
+                items.append(entry)
+                continue
             entry = MeshDraws([], [], [], [], bool(mesh is not None and mesh.has_tangents), [])
             for batch, slot in (mesh.batches if mesh is not None else ()):
                 material = _material(cache, mesh, slot, white, default_material,
@@ -296,7 +353,9 @@ def _draw_items(snap, cache, white, default_material):
                     shadow = entry.shadow_opaque if material.shadow_mode == 'OPAQUE' \
                         else entry.shadow_masked
                     shadow.append((batch, material))
-            per_mesh[instance.key] = entry
+            per_key[instance.key] = entry
+            if shared is not None:
+                per_mesh[shared] = entry
         items.append(entry)
     return items
 

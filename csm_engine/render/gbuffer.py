@@ -15,7 +15,7 @@ import numpy as np
 
 from ..core.frame_layout import FRAME_LAYOUT
 from ..core.shadow_plan import front_to_back
-from . import shaders
+from . import instancing, shaders
 from .draw_lists import GBUFFER_PROGRAMS, MATERIAL_SAMPLERS
 from .resources import HeldGBuffer
 
@@ -87,6 +87,8 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     order = np.asarray(front_to_back(snap, instances.bounds_lo_hi), dtype=np.int64)
     order = order[np.fromiter((i.visible_camera for i in snap.instances), dtype=bool,
                               count=len(snap.instances))[order]]
+    order = order[in_view(snap.camera.clip_from_world, instances.bounds_lo_hi, order,
+                          len(snap.instances))]
     terminator_offsets = np.fromiter((i.terminator_offset for i in snap.instances),
                                      dtype=np.float64, count=len(snap.instances))
     frame_cache = targets.frame_cache
@@ -107,52 +109,127 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     return gbuffer, False
 
 
+def in_view(clip_from_world, bounds_lo_hi, rows, count):
+    """Which of ``rows`` (instance indices) have a world box that may reach the view:
+    a box whose 8 corners all lie beyond one plane of the view frustum (x, y or z outside
+    -w..w in clip space) cannot draw a pixel. Only the others are drawn, and only their
+    matrices uploaded."""
+    rows = np.asarray(rows, dtype=np.int64)
+    if bounds_lo_hi is None or len(bounds_lo_hi[0]) != count or not len(rows):
+        return np.ones(len(rows), dtype=bool)
+    lo, hi = bounds_lo_hi[0][rows], bounds_lo_hi[1][rows]
+    m = np.asarray(clip_from_world, dtype=np.float64)
+    inside = np.ones(len(rows), dtype=bool)
+    for axis in range(3):
+        # x <= w and x >= -w are the planes (w - x) >= 0 and (w + x) >= 0, linear in the
+        # corner: a box's greatest value picks hi or lo per axis by the plane's sign.
+        for plane in (m[3] - m[axis], m[3] + m[axis]):
+            greatest = np.where(plane[:3] >= 0.0, hi, lo) @ plane[:3] + plane[3]
+            inside &= greatest >= 0.0
+    return inside
+
+
 def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuffer_fb,
           width, height):
     import gpu
-    library = shaders.LIBRARY
     items = lists.items
     mirrored = instances.mirrored
-    world_from_objects_gl = instances.world_from_objects_gl
+    per_program = []
+    for program, drawn in zip(GBUFFER_PROGRAMS, lists.gbuffer_masks):
+        rows = order[drawn[order]]
+        if len(rows):
+            per_program.append((program, _program_runs(lists, rows, mirrored,
+                                                        terminator_offsets)))
+    matrices = _instanced_matrices(instances, per_program)
     with gbuffer_fb.bind():
         gpu.state.viewport_set(0, 0, width, height)
         targets.call(gbuffer_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
         gpu.state.depth_test_set('LESS_EQUAL')
         gpu.state.depth_mask_set(True)
-        culling = 'NONE'
+        state = _DrawState()
+        offset = 0      # the next instanced run's first matrix in ``matrices``
         # Opaque before alpha-tested; untextured materials with the program that samples
         # no texture, meshes with tangents (normal maps) with the programs that read them.
-        for program, drawn in zip(GBUFFER_PROGRAMS, lists.gbuffer_masks):
-            rows = order[drawn[order]]
-            if not len(rows):
-                continue
-            shader = library.get(program.program)
-            shader.bind()
-            shader.uniform_block("frame", frame_ubo)
-            bound = None
-            offset = None
-            for index in rows.tolist():
-                draws = getattr(items[index], program.draws)
-                shader.uniform_float("world_from_object", world_from_objects_gl[index])
+        for program, runs in per_program:
+            for run in runs:
+                index = int(run[0])
+                if len(run) > 1:
+                    shader = state.use(program, True, frame_ubo)
+                    shader.uniform_sampler("instance_matrices", matrices)
+                    shader.uniform_int("instance_offset", offset)
+                    offset += len(run)
+                else:
+                    shader = state.use(program, False, frame_ubo)
+                    shader.uniform_float("world_from_object",
+                                         instances.world_from_objects_f32[index].tolist())
                 # Most objects share Blender's default: set only when it changes.
-                if terminator_offsets[index] != offset:
-                    offset = terminator_offsets[index]
-                    shader.uniform_float("terminator_offset", float(offset))
-                for batch, material in draws:
+                if terminator_offsets[index] != state.offset:
+                    state.offset = terminator_offsets[index]
+                    shader.uniform_float("terminator_offset", float(state.offset))
+                for batch, material in getattr(items[index], program.draws):
                     wanted = ('FRONT' if mirrored[index] else 'BACK') \
                         if material.backface_culling else 'NONE'
-                    if wanted != culling:
+                    if wanted != state.culling:
                         gpu.state.face_culling_set(wanted)
-                        culling = wanted
-                    if material is not bound:
+                        state.culling = wanted
+                    if material is not state.bound:
                         shader.uniform_block("material", material.block)
                         if program.textured:
                             for name, texture in zip(MATERIAL_SAMPLERS, material.textures):
                                 shader.uniform_sampler(name, texture)
-                        bound = material
-                    targets.call(batch.draw, shader)
+                        state.bound = material
+                    if len(run) > 1:
+                        targets.call(batch.draw_instanced, shader, instance_count=len(run))
+                    else:
+                        targets.call(batch.draw, shader)
         gpu.state.face_culling_set('NONE')
         gpu.state.depth_test_set('NONE')
+
+
+class _DrawState:
+    """The G-buffer's GL state while it draws: the bound program, material, culling and
+    Shadow Terminator Geometry Offset, so each is set only when it changes."""
+    __slots__ = ("shader", "bound", "culling", "offset")
+
+    def __init__(self):
+        self.shader, self.bound, self.culling, self.offset = None, None, 'NONE', None
+
+    def use(self, program, instanced, frame_ubo):
+        shader = shaders.LIBRARY.get(program.program + ("_instanced" if instanced else ""))
+        if shader is not self.shader:
+            shader.bind()
+            shader.uniform_block("frame", frame_ubo)
+            # A newly bound program has none of the last one's uniforms.
+            self.shader, self.bound, self.offset = shader, None, None
+        return shader
+
+
+def _program_runs(lists, rows, mirrored, terminator_offsets):
+    """One program's rows (near to far) as runs drawn together: copies of one mesh with
+    one winding and one Shadow Terminator Geometry Offset. Without instancing every row
+    is a run of its own, in order."""
+    if not lists.instancing:
+        return [rows[i:i + 1] for i in range(len(rows))]
+    # The runs' key: the mesh's group, then the winding and the offset (few distinct).
+    offsets = np.unique(terminator_offsets, return_inverse=True)[1].ravel()
+    keys = (lists.groups * 2 + mirrored) * (int(offsets.max(initial=0)) + 1) + offsets
+    return instancing.runs(rows, keys)
+
+
+def _instanced_matrices(instances, per_program):
+    """The texture of the instanced runs' world matrices, in draw order: the one made for
+    the same runs before (an unmoved view, a re-render), else a new upload."""
+    rows = [run for _program, runs in per_program for run in runs if len(run) > 1]
+    if not rows:
+        return None
+    rows = np.concatenate(rows)
+    key = rows.tobytes()
+    held = instances.gbuffer_matrices
+    if held[0] == key:
+        return held[1]
+    texture = instancing.matrix_texture(instances.world_from_objects_f32[rows])
+    instances.gbuffer_matrices = (key, texture)
+    return texture
 
 
 def gbuffer_contents(targets, snap, cache, lists, order, world_from_objects,
@@ -170,21 +247,22 @@ def gbuffer_contents(targets, snap, cache, lists, order, world_from_objects,
     if not targets.records or \
             (snap.is_viewport and (held is None or held.contents.camera != camera)):
         return GBufferContents(camera)
-    per_entry = {}
-    draws = []
+    # Instances of one group share their draws: each group's inputs once, then which group
+    # each drawn instance is.
+    groups = lists.groups[order]
+    unique, first = np.unique(groups, return_index=True)
+    per_group = []
     instances = snap.instances
     items = lists.items
-    for index in order.tolist():
+    for index in order[first].tolist():
         entry = items[index]
-        known = per_entry.get(id(entry))
-        if known is None:
-            mesh = cache.meshes.get(instances[index].key)
-            keys = tuple(material.gbuffer_key for _batch, material in
-                         entry.textured + entry.masked + entry.untextured)
-            if None in keys:
-                return None
-            known = per_entry[id(entry)] = (mesh.serial if mesh is not None else 0, keys)
-        draws.append(known)
+        mesh = cache.meshes.get(instances[index].key)
+        keys = tuple(material.gbuffer_key for _batch, material in
+                     entry.textured + entry.masked + entry.untextured)
+        if None in keys:
+            return None
+        per_group.append((mesh.serial if mesh is not None else 0, keys))
+    draws = (unique.tobytes(), tuple(per_group), groups.tobytes())
     # The facet target carries each object's Shadow Terminator Geometry Offset.
     return GBufferContents(camera, order.tobytes(), world_from_objects[order].tobytes(),
-                           tuple(draws), terminator_offsets[order].tobytes())
+                           draws, terminator_offsets[order].tobytes())

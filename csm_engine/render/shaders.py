@@ -149,6 +149,18 @@ for _name in ("gbuffer", "gbuffer_masked"):
         interface=_spec["interface"] + (("world_tangent", "VEC4", "smooth"),),
         defines=_spec.get("defines", ()) + (("NORMAL_MAP", "1"),))
 
+# Instanced twins of the mesh programs (INSTANCED, instance_matrix.glsl): every copy of a
+# mesh in one draw, each reading its matrix from the texture instance_matrices
+# (render/instancing.py) instead of the push constant.
+_PER_DRAW_MATRICES = ("world_from_object", "clip_from_object")
+for _name in [name for name in PROGRAMS if name.startswith(("gbuffer", "shadow"))]:
+    _spec = PROGRAMS[_name]
+    PROGRAMS[_name + "_instanced"] = dict(
+        _spec, push=tuple(p for p in _spec["push"] if p[1] not in _PER_DRAW_MATRICES)
+        + (("INT", "instance_offset"),),
+        samplers=_spec["samplers"] + (("FLOAT_2D", "instance_matrices"),),
+        defines=_spec.get("defines", ()) + (("INSTANCED", "1"),))
+
 # Screen-space ambient occlusion (ao_frag.glsl): the horizon search and a depth-aware blur,
 # both at half resolution; lighting brings it to full resolution and multiplies its ambient
 # term by the result.

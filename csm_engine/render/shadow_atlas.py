@@ -14,8 +14,8 @@ import numpy as np
 
 from ..core import cascades
 from ..core.shadow_plan import layout_atlas
-from . import shaders
-from .draw_lists import column_major_stack
+from . import instancing, shaders
+from .instancing import column_major_f32
 from .resources import AtlasTiles, PartialMarks
 
 
@@ -198,13 +198,15 @@ def _draw_partial_mask(targets, lists, instances, atlas, stale, cull_front, can_
 
 def _draw_casters(targets, lists, instances, tile, visible, cull_front, partial_only=False):
     """Draw the shadow casters ``visible`` (instance indices) into ``tile``: opaque,
-    then alpha-masked. ``partial_only``: only the alpha-hashed materials of the instances
-    that have some, with the partial-caster mask's program."""
+    then alpha-masked; copies of one mesh in one instanced draw (``lists.instancing``).
+    ``partial_only``: only the alpha-hashed materials of the instances that have some,
+    with the partial-caster mask's program."""
     import gpu
     library = shaders.LIBRARY
     items, mirrored = lists.items, instances.mirrored
-    clip_from_objects = column_major_stack(tile.clip_from_world @
-                                           instances.world_from_objects[visible])
+    # float64 products, then float32: the same values for both kinds of draw.
+    clip_from_objects = column_major_f32(tile.clip_from_world @
+                                         instances.world_from_objects[visible])
     default = 'FRONT' if cull_front else 'NONE'
     culling = default
     # (program, which instances it draws, their MeshDraws list, whether it reads the
@@ -213,15 +215,38 @@ def _draw_casters(targets, lists, instances, tile, visible, cull_front, partial_
         if partial_only else \
         (("shadow", lists.shadow_masks[0], "shadow_opaque", False),
          ("shadow_masked", lists.shadow_masks[1], "shadow_masked", True))
+    per_pass = []
     for program, drawn, draws, reads_material in passes:
-        rows = np.flatnonzero(drawn[visible])
+        rows = np.flatnonzero(drawn[visible])      # positions in ``visible``
         if not len(rows):
             continue
-        shadow = library.get(program)
-        shadow.bind()
-        bound = None
-        for row, index in zip(rows.tolist(), visible[rows].tolist()):
-            shadow.uniform_float("clip_from_object", clip_from_objects[row])
+        if lists.instancing:
+            # A run: copies of one mesh with one winding (culling may depend on it).
+            keys = lists.groups[visible] * 2 + mirrored[visible]
+            runs = instancing.runs(rows, keys)
+        else:
+            runs = [rows[i:i + 1] for i in range(len(rows))]
+        per_pass.append((program, draws, reads_material, runs))
+    together = [run for *_rest, runs in per_pass for run in runs if len(run) > 1]
+    matrices = instancing.matrix_texture(clip_from_objects[np.concatenate(together)]) \
+        if together else None
+    offset = 0      # the next instanced run's first matrix in ``matrices``
+    current = None
+    for program, draws, reads_material, runs in per_pass:
+        for run in runs:
+            row = int(run[0])
+            index = int(visible[row])
+            instanced = len(run) > 1
+            shadow = library.get(program + ("_instanced" if instanced else ""))
+            if shadow is not current:
+                shadow.bind()
+                current, bound = shadow, None
+            if instanced:
+                shadow.uniform_sampler("instance_matrices", matrices)
+                shadow.uniform_int("instance_offset", offset)
+                offset += len(run)
+            else:
+                shadow.uniform_float("clip_from_object", clip_from_objects[row].tolist())
             for batch, material in getattr(items[index], draws):
                 if partial_only and material.shadow_mode != 'HASHED':
                     continue
@@ -236,7 +261,10 @@ def _draw_casters(targets, lists, instances, tile, visible, cull_front, partial_
                     shadow.uniform_block("material", material.block)
                     shadow.uniform_sampler("base_color_texture", material.textures[0])
                     bound = material
-                targets.call(batch.draw, shadow)
+                if instanced:
+                    targets.call(batch.draw_instanced, shadow, instance_count=len(run))
+                else:
+                    targets.call(batch.draw, shadow)
     if culling != default:
         gpu.state.face_culling_set(default)
 

@@ -15,7 +15,7 @@ import threading
 import time
 
 import bpy
-import mathutils
+import numpy as np
 import pytest
 
 from csm_engine.blender import scene_builder
@@ -195,15 +195,16 @@ def test_fifo_as_an_obj_mtllib_or_mtl_map(scene, tmp_path):
 
 
 # (references, seconds allowed). Each reference used to run the importer again, which
-# is quadratic: 1,000 took 133 s and 3,000 took 1,405 s on 2 cores (docs/benchmarks.md).
+# is quadratic: 1,000 took 133 s and 3,000 took 1,405 s on 2 cores; now the file is
+# imported once and each reference is a vertex of one copies object (docs/benchmarks.md).
 REFERENCE_COUNTS = [pytest.param(1000, 20.0, id="1000"),
                     pytest.param(10000, 90.0, id="10000", marks=pytest.mark.slow)]
 
 
 @pytest.mark.parametrize("count, allowed", REFERENCE_COUNTS)
 @pytest.mark.parametrize("extension", [".gltf", ".obj"])
-def test_many_references_to_one_file_import_once_as_linked_copies(scene, tmp_path, count,
-                                                                  allowed, extension):
+def test_many_references_to_one_file_import_once_as_copies(scene, tmp_path, count, allowed,
+                                                          extension):
     if extension == ".gltf":
         mesh = write_box_gltf(str(tmp_path / "m" / "box.gltf"))
     else:
@@ -216,21 +217,27 @@ def test_many_references_to_one_file_import_once_as_linked_copies(scene, tmp_pat
     seconds = time.perf_counter() - start
     print(f"\nscene import: {count} references to one {extension}: {seconds:.2f} s")
     assert seconds < allowed, f"{count} references took {seconds:.1f} s"
-    meshes = [obj for obj in collection.all_objects if obj.type == 'MESH']
-    assert len(meshes) == count
-    assert len({obj.data.as_pointer() for obj in meshes}) == 1, "copies must share the mesh"
-    assert len([m for m in bpy.data.meshes if m.users]) == 1
-    bpy.context.view_layer.update()
-    for obj in meshes:
-        index = int(obj.parent.name.rsplit(" ", 1)[1].rstrip(")"))
-        assert obj.parent["csm_mesh"] == mesh
-        corners = [obj.matrix_world @ mathutils.Vector(c) for c in obj.bound_box]
-        assert abs(min(c.x for c in corners) - (3.0 * index - 1.0)) < 1e-4
-        height = max(c.z for c in corners) - min(c.z for c in corners)
-        assert abs(height - (1.0 + index % 3)) < 1e-4      # file y is Blender z
-    if count > 1000:
-        return      # replacing 10,000 objects: Blender's batch_remove takes minutes (known)
-    # Re-importing replaces it with the same names, as fast.
+    # One mesh, imported once, and one copies object with a vertex per reference.
+    assert len([m for m in bpy.data.meshes if m.users and m.polygons]) == 1
+    copies = collection.objects[f"box ({count} copies)"]
+    assert copies["csm_mesh"] == mesh and len(copies.data.vertices) == count
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    boxes = [(np.array(i.matrix_world), i.object.original) for i in depsgraph.object_instances
+             if i.is_instance and i.object.type == 'MESH']
+    assert len(boxes) == count
+    assert len({obj.name for _matrix, obj in boxes}) == 1
+    low_x, heights = [], []
+    local = np.array([tuple(c) for c in boxes[0][1].bound_box])
+    for matrix, _obj in boxes:
+        corners = local @ matrix[:3, :3].T + matrix[:3, 3]
+        low_x.append(corners[:, 0].min())
+        heights.append(np.ptp(corners[:, 2]))
+    order = np.argsort(low_x)
+    index = np.arange(count)
+    assert np.abs(np.array(low_x)[order] - (3.0 * index - 1.0)).max() < 1e-4
+    # file y is Blender z
+    assert np.abs(np.array(heights)[order] - (1.0 + index % 3)).max() < 1e-4
+    # Re-importing replaces it with the same names, in seconds.
     names = sorted(obj.name for obj in collection.all_objects)
     start = time.perf_counter()
     collection = scene_builder.import_scene_file(path)
@@ -238,6 +245,7 @@ def test_many_references_to_one_file_import_once_as_linked_copies(scene, tmp_pat
     print(f"scene import: replacing it: {seconds:.2f} s")
     assert seconds < allowed
     assert sorted(obj.name for obj in collection.all_objects) == names
+    assert [group.name for group in bpy.data.node_groups] == ["CSM Copies"]
 
 
 def test_mirrored_obj_and_shared_glb_keep_their_own_transforms(scene, tmp_path):
@@ -252,21 +260,22 @@ def test_mirrored_obj_and_shared_glb_keep_their_own_transforms(scene, tmp_path):
         {"mesh": gltf, "rotate": {"x": 0, "y": 90, "z": 0}, "translate": {"x": 0, "y": 5, "z": 0}},
     ]})
     collection = scene_builder.import_scene_file(path)
-    bpy.context.view_layer.update()
-    by_parent = {}
-    for item in collection.all_objects:
-        if item.type == 'MESH':
-            by_parent[item.parent.name] = item
-    plain, mirrored = by_parent["box (scene object 0)"], by_parent["box (scene object 1)"]
-    assert plain.data == mirrored.data
-    assert mirrored.matrix_world.determinant() < 0 < plain.matrix_world.determinant()
-    xs = sorted((mirrored.matrix_world @ v.co).x for v in mirrored.data.vertices)
+    assert {"box (2 copies)", "g (2 copies)"} <= set(collection.objects.keys())
+    depsgraph = bpy.context.evaluated_depsgraph_get()
+    by_mesh = {}
+    for instance in depsgraph.object_instances:
+        if instance.is_instance and instance.object.type == 'MESH':
+            by_mesh.setdefault(instance.object.original.name, []).append(
+                instance.matrix_world.copy())
+    box = bpy.data.objects["box"]
+    plain, mirrored = sorted(by_mesh["box"], key=lambda m: -m.translation.x)
+    assert mirrored.determinant() < 0 < plain.determinant()
+    xs = sorted((mirrored @ v.co).x for v in box.data.vertices)
     assert abs(xs[0] - (-12.0)) < 1e-4 and abs(xs[-1] - (-10.0)) < 1e-4
-    first, second = by_parent["g (scene object 2)"], by_parent["g (scene object 3)"]
-    assert first.data == second.data
+    first, second = sorted(by_mesh["g"], key=lambda m: m.translation.z)
     # The glTF node's own scale (y 2) stays below the scene object's transform.
-    assert abs(second.matrix_world.to_scale().z - 2.0) < 1e-4
-    assert abs(second.matrix_world.translation.z - 5.0) < 1e-4
+    assert abs(second.to_scale().z - 2.0) < 1e-4
+    assert abs(second.translation.z - 5.0) < 1e-4
 
 
 # ------------------------------------------------- item: nothing changed outside
