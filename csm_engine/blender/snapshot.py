@@ -265,7 +265,8 @@ def take(depsgraph, camera, is_viewport=False):
                 key, None,
                 visible_camera=bool(getattr(obj, "visible_camera", True)),
                 casts_shadow=bool(getattr(obj, "visible_shadow", True)),
-                terminator_offset=compat.terminator_geometry_offset(obj)))
+                terminator_offset=compat.terminator_geometry_offset(obj),
+                name=key, asset=_asset_name(original or obj)))
             # A copy: the instance (and a Matrix that wraps it) is reused by the iterator.
             matrices.append(instance.matrix_world.copy())
             if key not in mesh_sources:
@@ -289,6 +290,13 @@ def take(depsgraph, camera, is_viewport=False):
             warnings.append(f"{len(lights)} {kind} lights: CSM draws {limit}, "
                             f"{len(lights) - limit} are left out")
     return snap
+
+
+def _asset_name(obj):
+    """The name Cryptomatte Asset gives an object: its topmost parent's, as Blender's."""
+    while obj.parent is not None:
+        obj = obj.parent
+    return obj.name
 
 
 def _active_sun(depsgraph, suns):

@@ -49,19 +49,26 @@ def draw_viewport_fxaa(pipeline, snap, cache, width, height):
     return plan
 
 
-def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux):
+def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, passes=None,
+                     pass_textures=()):
     """Final-render anti-aliasing into ``color`` (Combined) and ``aux`` (the auxiliary
     passes): FXAA on one sample, or ``samples`` jittered frames averaged into a running
-    mean. Sample 0 is unjittered and writes ``aux``; later samples reuse its shadow plan,
-    so the shadow maps are drawn once. Returns ``Antialiased``."""
+    mean. Sample 0 is unjittered and writes ``aux`` and the light and colour passes
+    (``pass_textures``); later samples reuse its shadow plan, so the shadow maps are drawn
+    once. Every sample gives its Cryptomatte IDs when ``passes`` asks for them. Returns
+    ``Antialiased``."""
     targets = pipeline.targets
     width, height = snap.camera.width, snap.camera.height
     lit = targets.texture("lit_final", (width, height), 'RGBA32F')
     depth = targets.gbuffer_depth(width, height)
-    first_fb = targets.framebuffer("lit_first", depth=depth, colors=(lit, aux))
+    first_fb = targets.framebuffer("lit_first_passes" if pass_textures else "lit_first",
+                                   depth=depth, colors=(lit, aux) + tuple(pass_textures))
+    offsets, weights = sample_offsets(samples, snap.pixel_filter_width) if not use_fxaa \
+        else (None, (1.0,))
     started = time.perf_counter()
     plan = pipeline.draw(snap, cache, first_fb, width, height, overlays=False,
-                         depth_tested=True)
+                         depth_tested=True, passes=passes,
+                         lighting_passes=bool(pass_textures), sample_weight=weights[0])
     passes = pipeline.last_frame
     timings = dict(pipeline.timings)
     color_fb = targets.framebuffer("final_color_only", colors=(color,))
@@ -73,7 +80,6 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux):
         timings["total"] = timings.get("total", 0.0) + timings["fxaa"]
         return Antialiased(plan, color_fb, timings, passes)
     # A running mean ping-pongs between the final colour target and a second one.
-    offsets, weights = sample_offsets(samples, snap.pixel_filter_width)
     spare = targets.texture("accumulate", (width, height), 'RGBA32F')
     spare_fb = targets.framebuffer("accumulate", colors=(spare,))
     scratch_aux = targets.texture("lit_aux_scratch", (width, height), 'RGBA32F')
@@ -87,7 +93,7 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux):
         sample = dataclasses.replace(snap, camera=jittered(snap.camera, offset),
                                      sample_index=index)
         pipeline.draw(sample, cache, sample_fb, width, height, plan=plan, overlays=False,
-                      depth_tested=True)
+                      depth_tested=True, passes=passes, sample_weight=weight)
         passes = passes + pipeline.last_frame
         for name, value in pipeline.timings.items():
             if name != "total":

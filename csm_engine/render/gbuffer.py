@@ -2,7 +2,8 @@
 
 Owns the G-buffer's targets (``GBuffer``): albedo+specular, normal+shininess, view depth
 (0 = background), the triangle's own normal+the object's Shadow Terminator Geometry Offset
-(facet), emission+metallic, and depth; materials are one uniform block each
+(facet), emission+metallic, depth and, for Cryptomatte passes only, each pixel's object,
+material and asset IDs (render/passes.py); materials are one uniform block each
 (core/material_layout.py). World positions are rebuilt from view depth where needed
 (``core.camera.world_positions``). Also owns ``GBufferContents``: what a G-buffer drawn now
 would hold, so that one the targets already hold is not drawn again (F12 after a shadow or
@@ -15,7 +16,7 @@ import numpy as np
 
 from ..core.frame_layout import FRAME_LAYOUT
 from ..core.shadow_plan import front_to_back
-from . import shaders
+from . import passes, shaders
 from .draw_lists import GBUFFER_PROGRAMS, MATERIAL_SAMPLERS
 from .resources import HeldGBuffer
 
@@ -32,6 +33,7 @@ class GBuffer(NamedTuple):
     facet: object
     depth: object
     framebuffer: object
+    ids: object = None      # Cryptomatte IDs (object, material, asset, 1), when asked for
 
 
 class GBufferContents(NamedTuple):
@@ -55,12 +57,13 @@ def programs_key():
 
 
 def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, width,
-                 height):
+                 height, ids=None):
     """Draw the camera's view of ``lists`` (``DrawLists``) at ``instances``' matrices
     (``InstanceArrays``) into the G-buffer targets, near to far, with the frame block
     ``frame_ubo`` (``frame_data`` as numpy). Keeps the targets as they are when they hold
-    what it would draw (the frame cache's ``gbuffer``). Returns (``GBuffer``, whether it
-    was kept)."""
+    what it would draw (the frame cache's ``gbuffer``). ``ids`` (``passes.DrawIds``): also
+    write the Cryptomatte IDs, with the CRYPTOMATTE programs into one more target (such a
+    G-buffer is always drawn, never kept). Returns (``GBuffer``, whether it was kept)."""
     albedo = targets.texture("albedo", (width, height), 'RGBA16F')
     normal = targets.texture("normal", (width, height), 'RGBA16F')
     view_depth = targets.texture("view_depth", (width, height), 'R32F')
@@ -70,7 +73,15 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     # Emission and metallic have a target only in frames that draw some: without it each
     # fragment writes a sixth less (llvmpipe: ~15 % of the G-buffer), and the lighting pass
     # reads an emission texture kept at zero.
-    if lists.writes_emission:
+    id_target = None
+    if ids is not None:
+        # The IDs take the fifth slot, so emission is always drawn in these frames.
+        id_target = targets.texture("cryptomatte_ids", (width, height), 'RGBA32F')
+        gbuffer_fb = targets.framebuffer("gbuffer_ids", depth=depth,
+                                         colors=(albedo, normal, view_depth, facet, emission,
+                                                 id_target))
+        targets.zeroed_emission = None
+    elif lists.writes_emission:
         gbuffer_fb = targets.framebuffer("gbuffer", depth=depth,
                                          colors=(albedo, normal, view_depth, facet, emission))
         targets.zeroed_emission = None
@@ -82,7 +93,8 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
             with emission_fb.bind():
                 targets.call(emission_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
             targets.zeroed_emission = emission
-    gbuffer = GBuffer(albedo, normal, view_depth, emission, facet, depth, gbuffer_fb)
+    gbuffer = GBuffer(albedo, normal, view_depth, emission, facet, depth, gbuffer_fb,
+                      id_target)
     # Near to far, so the early depth test skips the shading of hidden fragments.
     order = np.asarray(front_to_back(snap, instances.bounds_lo_hi), dtype=np.int64)
     order = order[np.fromiter((i.visible_camera for i in snap.instances), dtype=bool,
@@ -93,6 +105,8 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     drawn_into = (albedo, normal, view_depth, emission, depth, facet)
     contents = gbuffer_contents(targets, snap, cache, lists, order,
                                 instances.world_from_objects, terminator_offsets, frame_data)
+    if ids is not None:
+        contents = None
     held = frame_cache.gbuffer
     if targets.records and contents is not None and held is not None and \
             held.contents == contents and \
@@ -101,14 +115,14 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     if targets.records:
         frame_cache.forget_gbuffer()
     _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuffer_fb,
-          width, height)
+          width, height, ids)
     if contents is not None and targets.records:
         frame_cache.gbuffer = HeldGBuffer(drawn_into, contents)
     return gbuffer, False
 
 
 def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuffer_fb,
-          width, height):
+          width, height, ids=None):
     import gpu
     library = shaders.LIBRARY
     items = lists.items
@@ -126,7 +140,7 @@ def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuff
             rows = order[drawn[order]]
             if not len(rows):
                 continue
-            shader = library.get(program.program)
+            shader = library.get(program.program + ("_ids" if ids is not None else ""))
             shader.bind()
             shader.uniform_block("frame", frame_ubo)
             bound = None
@@ -138,6 +152,9 @@ def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuff
                 if terminator_offsets[index] != offset:
                     offset = terminator_offsets[index]
                     shader.uniform_float("terminator_offset", float(offset))
+                if ids is not None:
+                    shader.uniform_float("cryptomatte_object", float(ids.per_instance[index, 0]))
+                    shader.uniform_float("cryptomatte_asset", float(ids.per_instance[index, 1]))
                 for batch, material in draws:
                     wanted = ('FRONT' if mirrored[index] else 'BACK') \
                         if material.backface_culling else 'NONE'
@@ -146,6 +163,9 @@ def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuff
                         culling = wanted
                     if material is not bound:
                         shader.uniform_block("material", material.block)
+                        if ids is not None:
+                            shader.uniform_float("cryptomatte_material",
+                                                 passes.material_id(ids, material.name))
                         if program.textured:
                             for name, texture in zip(MATERIAL_SAMPLERS, material.textures):
                                 shader.uniform_sampler(name, texture)

@@ -149,6 +149,17 @@ for _name in ("gbuffer", "gbuffer_masked"):
         interface=_spec["interface"] + (("world_tangent", "VEC4", "smooth"),),
         defines=_spec.get("defines", ()) + (("NORMAL_MAP", "1"),))
 
+# Final renders with Cryptomatte passes draw the G-buffer with these twins (CRYPTOMATTE): a
+# sixth target holds each pixel's object, material and asset IDs, set per draw.
+for _name in [name for name in PROGRAMS if name.startswith("gbuffer")]:
+    _spec = PROGRAMS[_name]
+    PROGRAMS[_name + "_ids"] = dict(
+        _spec, push=_spec["push"] + (("FLOAT", "cryptomatte_object"),
+                                     ("FLOAT", "cryptomatte_material"),
+                                     ("FLOAT", "cryptomatte_asset")),
+        outputs=_spec["outputs"] + (("VEC4", "out_ids"),),
+        defines=_spec.get("defines", ()) + (("CRYPTOMATTE", "1"),))
+
 # Screen-space ambient occlusion (ao_frag.glsl): the horizon search and a depth-aware blur,
 # both at half resolution; lighting brings it to full resolution and multiplies its ambient
 # term by the result.
@@ -185,6 +196,17 @@ for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
     PROGRAMS[_name + "_debug"] = dict(
         PROGRAMS[_name],
         defines=PROGRAMS[_name].get("defines", ()) + (("WITH_DEBUG_VIEWS", "1"),))
+
+# Final renders with render passes on draw with PASSES twins of the lighting and background
+# programs: four more targets (render/passes.py, LIGHTING_PASS_TARGETS) with the light and
+# colour passes, so a render without them pays for none of it.
+PASS_OUTPUTS = (("VEC4", "out_diffuse_light"), ("VEC4", "out_specular_light"),
+                ("VEC4", "out_diffuse_color"), ("VEC4", "out_specular_color"))
+for _name in [name for name in PROGRAMS if name.startswith(("lighting", "background"))]:
+    _spec = PROGRAMS[_name]
+    PROGRAMS[_name + "_passes"] = dict(
+        _spec, outputs=_spec["outputs"] + PASS_OUTPUTS,
+        defines=_spec.get("defines", ()) + (("PASSES", "1"),))
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
 
