@@ -49,13 +49,14 @@ def draw_viewport_fxaa(pipeline, snap, cache, width, height):
     return plan
 
 
-def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, passes=None,
+def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, request=None,
                      pass_textures=()):
     """Final-render anti-aliasing into ``color`` (Combined) and ``aux`` (the auxiliary
     passes): FXAA on one sample, or ``samples`` jittered frames averaged into a running
     mean. Sample 0 is unjittered and writes ``aux`` and the light and colour passes
     (``pass_textures``); later samples reuse its shadow plan, so the shadow maps are drawn
-    once. Every sample gives its Cryptomatte IDs when ``passes`` asks for them. Returns
+    once. Every sample gives its Cryptomatte IDs when ``request`` (``passes.PassRequest``)
+    asks for them. Returns
     ``Antialiased``."""
     targets = pipeline.targets
     width, height = snap.camera.width, snap.camera.height
@@ -67,7 +68,7 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, passe
         else (None, (1.0,))
     started = time.perf_counter()
     plan = pipeline.draw(snap, cache, first_fb, width, height, overlays=False,
-                         depth_tested=True, passes=passes,
+                         depth_tested=True, passes=request,
                          lighting_passes=bool(pass_textures), sample_weight=weights[0])
     passes = pipeline.last_frame
     timings = dict(pipeline.timings)
@@ -93,7 +94,7 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, passe
         sample = dataclasses.replace(snap, camera=jittered(snap.camera, offset),
                                      sample_index=index)
         pipeline.draw(sample, cache, sample_fb, width, height, plan=plan, overlays=False,
-                      depth_tested=True, passes=passes, sample_weight=weight)
+                      depth_tested=True, passes=request, sample_weight=weight)
         passes = passes + pipeline.last_frame
         for name, value in pipeline.timings.items():
             if name != "total":
