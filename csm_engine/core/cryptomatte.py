@@ -15,12 +15,13 @@ IDs alone isolate an object; the manifest lets its picker show names. numpy only
 import json
 import math
 import struct
+from types import MappingProxyType
 
 import numpy as np
 
 # The three layers Blender offers (View Layer > Passes > Cryptomatte) and their pass names.
-LAYER_PASS_NAMES = {"OBJECT": "CryptoObject", "MATERIAL": "CryptoMaterial",
-                    "ASSET": "CryptoAsset"}
+LAYER_PASS_NAMES = MappingProxyType({"OBJECT": "CryptoObject", "MATERIAL": "CryptoMaterial",
+                                     "ASSET": "CryptoAsset"})
 _MASK32 = 0xFFFFFFFF
 
 

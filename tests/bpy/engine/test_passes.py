@@ -99,6 +99,7 @@ def _render_through(scene, engine_id, folder, wire):
     finally:
         if hasattr(scene, "compositing_node_group"):
             scene.compositing_node_group = None
+            bpy.data.node_groups.remove(tree)
         else:
             scene.use_nodes = False
 
