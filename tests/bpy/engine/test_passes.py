@@ -137,8 +137,9 @@ def test_passes_off_write_nothing_extra(empty_scene):
 
 @pytest.mark.parametrize("pass_name,setting", [("Depth", "use_pass_z"),
                                                ("Normal", "use_pass_normal"),
-                                               ("Mist", "use_pass_mist")])
-def test_depth_normal_and_mist_match_eevee(empty_scene, tmp_path, pass_name, setting):
+                                               ("Mist", "use_pass_mist"),
+                                               ("Position", "use_pass_position")])
+def test_geometry_passes_match_eevee(empty_scene, tmp_path, pass_name, setting):
     scene = empty_scene
     _scene(scene)
     setattr(scene.view_layers[0], setting, True)
@@ -153,9 +154,14 @@ def test_depth_normal_and_mist_match_eevee(empty_scene, tmp_path, pass_name, set
     eevee = _render_through(scene, eevee_engine_id(), tmp_path,
                             lambda tree, layers: layers.outputs[render_pass_name(pass_name)])
     theirs = eevee[..., :ours.shape[-1]]
-    if pass_name == "Depth":
-        error = np.abs(ours - theirs)[covered] / theirs[covered]
-        tolerance = 1e-4
+    if pass_name in ("Depth", "Position"):
+        # Relative to the distance from the camera.
+        distance = np.linalg.norm(csm.images["Position"] - np.array(
+            scene.camera.matrix_world.translation), axis=-1) if pass_name == "Position" \
+            else theirs[..., 0]
+        error = np.abs(ours - theirs).max(axis=-1)[covered] / distance[covered]
+        # EEVEE's Position agrees to about half-float steps (measured: mean 1.2e-4).
+        tolerance = 1e-4 if pass_name == "Depth" else 1e-3
     else:
         # Normals come from a half-float G-buffer target (about 1e-3); Mist is 0..1.
         error = np.abs(ours - theirs)[covered].max(axis=-1)
@@ -229,3 +235,20 @@ def test_cryptomatte_isolates_objects_as_cycles_does(empty_scene, tmp_path):
     csm = _matte(scene, "CSM", tmp_path, f"{layer.name}.CryptoMaterial", "Metal")
     box = _matte(scene, "CSM", tmp_path, layer_name, "Box")
     assert ((csm > 0.5) == (box > 0.5)).mean() > 0.999
+
+
+@pytest.mark.parametrize("kind,shift", [("PERSP", (0.0, 0.0)), ("PERSP", (0.2, -0.1)),
+                                        ("ORTHO", (0.1, 0.3))])
+def test_position_pass_points_are_the_unprojected_pixels(kind, shift):
+    """The Position and Mist passes' fast unprojection gives the general 4x4 one's points."""
+    from csm_engine.core.camera import CameraProjection, CameraView, world_positions
+    from csm_engine.render.passes import world_points
+    projection = CameraProjection(kind=kind, shift_x=shift[0], shift_y=shift[1],
+                                  aspect=40 / 30)
+    world_from_view = np.eye(4)
+    world_from_view[:3, :3] = [[0.0, -0.6, 0.8], [1.0, 0.0, 0.0], [0.0, 0.8, 0.6]]
+    world_from_view[:3, 3] = (3.0, -2.0, 5.0)
+    camera = CameraView(world_from_view, projection.clip_from_view(), 40, 30)
+    depth = np.random.default_rng(1).uniform(0.5, 50.0, (30, 40))
+    expected = world_positions(camera, depth)
+    assert np.abs(world_points(camera, depth) - expected).max() < 1e-9 * 50
