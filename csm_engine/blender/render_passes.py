@@ -89,7 +89,8 @@ def _fit_channels(pixels, channels):
 def write(engine, render_result, images, wanted, metadata):
     """Write ``images`` (pass name -> (H, W, C), already cut to the result's region) into
     ``render_result``'s first layer for every pass ``wanted`` writes, and ``metadata``
-    into its stamp data. A pass Blender did not allocate is added where Blender allows."""
+    into the render's stamp data. A pass Blender did not allocate is added where Blender
+    allows."""
     passes = render_result.layers[0].passes
     for name, spec in _specs(wanted):
         pixels = images.get(spec.name)
@@ -106,5 +107,9 @@ def write(engine, render_result, images, wanted, metadata):
             if render_pass is None:
                 continue
         compat.write_pass(render_pass, _fit_channels(pixels, render_pass.channels))
+    # NOTE: the stamp data of the render itself (get_result, as Cycles writes its
+    # Cryptomatte metadata): ``begin_result``'s result is merged into it by its pixels
+    # alone, so fields added there never reach the image or a file.
+    full_result = engine.get_result() if metadata else None
     for key, value in metadata.items():
-        render_result.stamp_data_add_field(key, value)
+        (full_result or render_result).stamp_data_add_field(key, value)

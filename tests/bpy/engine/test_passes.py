@@ -209,8 +209,6 @@ def _matte(scene, engine_id, folder, layer_name, object_name):
 
 
 def test_cryptomatte_isolates_objects_as_cycles_does(empty_scene, tmp_path):
-    if not hasattr(empty_scene, "compositing_node_group"):
-        pytest.skip("the compositor's Cryptomatte node is driven here on bpy 5.0")
     scene = empty_scene
     objects = _scene(scene)
     layer = scene.view_layers[0]
@@ -252,3 +250,29 @@ def test_position_pass_points_are_the_unprojected_pixels(kind, shift):
     depth = np.random.default_rng(1).uniform(0.5, 50.0, (30, 40))
     expected = world_positions(camera, depth)
     assert np.abs(world_points(camera, depth) - expected).max() < 1e-9 * 50
+
+
+def test_cryptomatte_metadata_reaches_the_openexr_header(empty_scene, tmp_path):
+    """Readers outside Blender find the layer's name, hash, conversion and manifest."""
+    scene = empty_scene
+    _scene(scene)
+    scene.view_layers[0].use_pass_cryptomatte_object = True
+    scene.render.engine = "CSM"
+    bpy.ops.render.render()
+    path = str(tmp_path / "crypto.exr")
+    settings = scene.render.image_settings
+    if hasattr(settings, "media_type"):
+        settings.media_type = 'MULTI_LAYER_IMAGE'
+    settings.file_format = 'OPEN_EXR_MULTILAYER'
+    bpy.data.images["Render Result"].save_render(filepath=path, scene=scene)
+    with open(path, "rb") as handle:
+        header = handle.read(16384)
+    from csm_engine.core import cryptomatte
+    layer = f"{scene.view_layers[0].name}.CryptoObject"
+    key = f"cryptomatte/{cryptomatte.murmurhash3_32(layer):08x}"[:19].encode()
+    assert key + b"/name" in header and key + b"/manifest" in header
+    assert b"MurmurHash3_32" in header and b"uint32_to_float32" in header
+    for name in ("Ground", "Box", "Sphere", "Cone"):
+        entry = f'"{name}":"{cryptomatte.murmurhash3_32(name):08x}"'.encode()
+        assert entry in header, f"{name} missing from the manifest"
+    assert b"CryptoObject00" in header
