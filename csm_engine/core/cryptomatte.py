@@ -101,6 +101,13 @@ def rank_coverage(ids, weights, levels):
     are 0, 0."""
     ids = np.asarray(ids, dtype=np.float32)
     samples, height, width = ids.shape
+    if samples == 1:
+        # One sample: each pixel is wholly its one ID (the common render without AA).
+        out_ids = np.zeros((height, width, levels), dtype=np.float32)
+        out_cov = np.zeros((height, width, levels), dtype=np.float32)
+        out_ids[..., 0] = ids[0]
+        out_cov[..., 0] = ids[0] != 0.0
+        return out_ids, out_cov
     weights = np.asarray(weights, dtype=np.float64).reshape(samples, 1)
     flat = ids.reshape(samples, -1)
     # Equal IDs become neighbours; each run's weights are summed at its last sample.

@@ -68,3 +68,11 @@ def test_levels_pack_two_to_a_pass():
     assert len(passes) == cryptomatte.pass_count(5) == 3
     assert passes[0][0, 0].tolist() == pytest.approx([1, 0.1, 2, 0.2])
     assert passes[2][0, 0].tolist() == pytest.approx([5, 0.5, 0, 0])
+
+
+def test_one_sample_gives_each_pixel_its_id_wholly():
+    a = cryptomatte.name_id("a")
+    ids = np.array([[[a, 0.0]]], dtype=np.float32)
+    ranked, coverage = cryptomatte.rank_coverage(ids, [1.0], 2)
+    assert ranked[0].tolist() == [[a, 0.0], [0.0, 0.0]]
+    assert coverage[0].tolist() == [[1.0, 0.0], [0.0, 0.0]]
