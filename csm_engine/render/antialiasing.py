@@ -53,11 +53,10 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, reque
                      pass_textures=()):
     """Final-render anti-aliasing into ``color`` (Combined) and ``aux`` (the auxiliary
     passes): FXAA on one sample, or ``samples`` jittered frames averaged into a running
-    mean. Sample 0 is unjittered and writes ``aux`` and the light and colour passes
-    (``pass_textures``); later samples reuse its shadow plan, so the shadow maps are drawn
-    once. Every sample gives its Cryptomatte IDs when ``request`` (``passes.PassRequest``)
-    asks for them. Returns
-    ``Antialiased``."""
+    mean. Sample 0 is unjittered and writes ``aux``; later samples reuse its shadow plan,
+    so the shadow maps are drawn once. The light and colour passes (``pass_textures``) are
+    averaged like Combined, and every sample gives its Cryptomatte IDs when ``request``
+    (``passes.PassRequest``) asks for them. Returns ``Antialiased``."""
     targets = pipeline.targets
     width, height = snap.camera.width, snap.camera.height
     lit = targets.texture("lit_final", (width, height), 'RGBA32F')
@@ -84,7 +83,10 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, reque
     spare = targets.texture("accumulate", (width, height), 'RGBA32F')
     spare_fb = targets.framebuffer("accumulate", colors=(spare,))
     scratch_aux = targets.texture("lit_aux_scratch", (width, height), 'RGBA32F')
-    sample_fb = targets.framebuffer("lit_sample", depth=depth, colors=(lit, scratch_aux))
+    scratch_passes = tuple(targets.texture(f"{index}_pass_sample", (width, height), 'RGBA32F')
+                           for index in range(len(pass_textures)))
+    sample_fb = targets.framebuffer("lit_sample_passes" if pass_textures else "lit_sample",
+                                    depth=depth, colors=(lit, scratch_aux) + scratch_passes)
     targets.fullscreen_pass("accumulate", color_fb, width, height,
                             (("previous", lit), ("current", lit)), (("sample_share", 1.0),))
     accumulating = time.perf_counter() - t
@@ -94,7 +96,8 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, reque
         sample = dataclasses.replace(snap, camera=jittered(snap.camera, offset),
                                      sample_index=index)
         pipeline.draw(sample, cache, sample_fb, width, height, plan=plan, overlays=False,
-                      depth_tested=True, passes=request, sample_weight=weight)
+                      depth_tested=True, passes=request, lighting_passes=bool(pass_textures),
+                      sample_weight=weight)
         passes = passes + pipeline.last_frame
         for name, value in pipeline.timings.items():
             if name != "total":
@@ -104,6 +107,9 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, reque
         targets.fullscreen_pass("accumulate", other_fb, width, height,
                                 (("previous", mean), ("current", lit)),
                                 (("sample_share", float(weight / total)),))
+        for slot, (mean_pass, sample_pass) in enumerate(zip(pass_textures, scratch_passes)):
+            _accumulate_in_place(targets, slot, mean_pass, sample_pass,
+                                 float(weight / total), width, height)
         accumulating += time.perf_counter() - t
         mean, mean_fb, other, other_fb = other, other_fb, mean, mean_fb
     # The samples' own passes are added into shadow/gbuffer/lighting above; this step
@@ -112,3 +118,16 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, reque
     timings["total"] = time.perf_counter() - started
     draw_overlays(snap, plan, mean_fb, width, height)
     return Antialiased(plan, mean_fb, timings, passes)
+
+
+def _accumulate_in_place(targets, slot, mean, sample, share, width, height):
+    """Move render pass ``slot``'s running mean ``mean`` towards ``sample`` by ``share``,
+    through a spare target (one cannot be read and written in one pass), so the passes stay
+    in the targets the final framebuffer reads."""
+    spare = targets.texture("accumulate_pass", (width, height), 'RGBA32F')
+    spare_fb = targets.framebuffer("accumulate_pass", colors=(spare,))
+    targets.fullscreen_pass("accumulate", spare_fb, width, height,
+                            (("previous", mean), ("current", sample)), (("sample_share", share),))
+    mean_fb = targets.framebuffer(f"accumulate_pass_{slot}", colors=(mean,))
+    targets.fullscreen_pass("accumulate", mean_fb, width, height,
+                            (("previous", spare), ("current", spare)), (("sample_share", 1.0),))
