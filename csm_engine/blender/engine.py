@@ -219,7 +219,9 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         # Blender itself pastes it into the full frame unless Crop to Render Region is on.
         x0, y0, x1, y1 = render_region(scene.render, width, height)
         region_images = {name: image[y0:y1, x0:x1] for name, image in result.images.items()}
-        render_result = self.begin_result(0, 0, x1 - x0, y1 - y0)
+        # Blender calls render() once per view layer: this one's passes go to its own layer.
+        render_result = self.begin_result(0, 0, x1 - x0, y1 - y0,
+                                          layer=depsgraph.view_layer.name)
         compat.write_pass(render_result.layers[0].passes["Combined"],
                           region_images["combined"])
         aux = region_images["aux"]
