@@ -154,7 +154,8 @@ for _name in ("gbuffer", "gbuffer_masked"):
 for _name in [name for name in PROGRAMS if name.startswith("gbuffer")]:
     _spec = PROGRAMS[_name]
     PROGRAMS[_name + "_ids"] = dict(
-        _spec, push=_spec["push"] + (("FLOAT", "cryptomatte_object"),
+        _spec, on_demand=True,
+        push=_spec["push"] + (("FLOAT", "cryptomatte_object"),
                                      ("FLOAT", "cryptomatte_material"),
                                      ("FLOAT", "cryptomatte_asset")),
         outputs=_spec["outputs"] + (("VEC4", "out_ids"),),
@@ -199,13 +200,16 @@ for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
 
 # Final renders with render passes on draw with PASSES twins of the lighting and background
 # programs: four more targets (render/passes.py, LIGHTING_PASS_TARGETS) with the light and
-# colour passes, so a render without them pays for none of it.
+# colour passes, so a render without them pays for none of it. These twins and the
+# G-buffer's CRYPTOMATTE ones are compiled when first drawn (``on_demand``), not with the
+# library: they would double its compile time (about 1 s here) for renders that never use
+# them.
 PASS_OUTPUTS = (("VEC4", "out_diffuse_light"), ("VEC4", "out_specular_light"),
                 ("VEC4", "out_diffuse_color"), ("VEC4", "out_specular_color"))
 for _name in [name for name in PROGRAMS if name.startswith(("lighting", "background"))]:
     _spec = PROGRAMS[_name]
     PROGRAMS[_name + "_passes"] = dict(
-        _spec, outputs=_spec["outputs"] + PASS_OUTPUTS,
+        _spec, on_demand=True, outputs=_spec["outputs"] + PASS_OUTPUTS,
         defines=_spec.get("defines", ()) + (("PASSES", "1"),))
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
@@ -465,7 +469,8 @@ class ShaderLibrary:
         compiled = {}
         try:
             for name, spec in PROGRAMS.items():
-                compiled[name] = _build(name, spec, directory)
+                if not spec.get("on_demand"):
+                    compiled[name] = _build(name, spec, directory)
         except BaseException:
             _RETIRED.append(compiled)      # the programs that did compile, freed later
             raise
@@ -495,7 +500,11 @@ class ShaderLibrary:
     def get(self, name):
         if self._shaders is None:
             self._compile_first()
-        return self._shaders[name]
+        shader = self._shaders.get(name)
+        if shader is None:
+            # An on-demand program (see PROGRAMS), from the folder the others came from.
+            shader = self._shaders[name] = _build(name, PROGRAMS[name], self.compiled_from)
+        return shader
 
     def release(self):
         """Drop the compiled programs (they compile again on the next ``get``); like every
