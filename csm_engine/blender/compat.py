@@ -2,9 +2,8 @@
 
 Owns the shims: reading mesh data through generic attributes where they exist (3.5+, one
 memory copy) and through the older per-element paths before; corner normals (4.1+) versus
-``calc_normals_split``; RenderResult passes that take a flat array (4.x+) or rows (3.4), and render pass names
-(spelled out in 5.0, short before);
-the Principled BSDF's renamed specular and emission inputs; material alpha, shadow and
+``calc_normals_split``; RenderResult passes that take a flat array (4.x+) or rows (3.4),
+and render pass names (spelled out in 5.0, short before); the Principled BSDF's renamed specular and emission inputs; material alpha, shadow and
 culling settings (``blend_method``/``shadow_method`` up to 4.1, ``surface_render_method``/
 ``use_transparent_shadow`` from 4.2); MikkTSpace tangents; the glTF importer of 3.4/3.5 that needs
 ``np.bool``; an object's Shadow Terminator Geometry Offset (Object in 5.0, the Cycles

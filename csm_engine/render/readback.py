@@ -21,9 +21,9 @@ READS.update({name: ("final", 2 + slot) for slot, name in enumerate(LIGHTING_PAS
 
 def read_images(snap, reads, final_fb, combined_fb, gbuffer_fb, with_positions=False):
     """``reads``: image name ("combined", "aux", "normal", a ``LIGHTING_PASS_TARGETS``
-    name) -> channels (1..4, from the first). Returns name -> (H, W, channels) float32, bottom row first; with
-    ``with_positions`` also "position" (xyz world position, w coverage; needs "aux" with
-    4 channels)."""
+    name) -> channels (1..4, from the first). Returns name -> (H, W, channels) float32,
+    bottom row first; with ``with_positions`` also "position" (xyz world position, w
+    coverage; needs "aux" with 4 channels)."""
     import gpu
     width, height = snap.camera.width, snap.camera.height
     out = {}
