@@ -56,6 +56,17 @@ vec3 ambient_light(Surface s, ivec2 px, out float visibility)
   return color * visibility;
 }
 
+/* ambient_light in its diffuse and specular parts, for the light passes (the two add up
+ * to what ambient_light returns for the same `visibility`): the World times the diffuse
+ * layer's colour is the diffuse part; the rest of albedo x World (a metal's, which has no
+ * diffuse layer) the specular. Change both together. */
+void ambient_light_split(Surface s, float visibility, out vec3 diffuse, out vec3 specular)
+{
+  vec3 world = frame.ambient_color * visibility;
+  diffuse = world * surface_diffuse_color(s);
+  specular = world * s.albedo - diffuse;
+}
+
 /* Adds the sun's light on surface s to `color`, through its cascaded shadow maps. Returns
  * what the lookups found: the sun's visibility (1 lit, 0 shadowed), the cascade read
  * (fractional inside a blend band, -1 for none) and the first shadow tile read (-1 beyond
@@ -186,16 +197,15 @@ vec3 light_pass(vec3 reflected, vec3 layer_color)
 }
 
 #ifdef PASSES
-/* The passes of surface s, whose World light reached it by `ambient_visibility` (its AO):
- * the World's share goes to the layers as ambient_light gave it (albedo x World, of which
- * the diffuse layer's colour is the diffuse part and the rest, a metal's, the specular). */
-void write_surface_passes(Surface s, ivec2 px, float ambient_visibility)
+/* The passes of surface s, whose World light reached it by `ambient_visibility` (its AO),
+ * the World's share split by ambient_light_split. */
+void write_surface_passes(Surface s, float ambient_visibility)
 {
   vec3 diffuse_color = surface_diffuse_color(s);
   vec3 specular_color = surface_specular_color(s);
-  vec3 world = frame.ambient_color * ambient_visibility;
-  vec3 world_diffuse = world * diffuse_color;
-  vec3 world_specular = world * s.albedo - world_diffuse;
+  vec3 world_diffuse;
+  vec3 world_specular;
+  ambient_light_split(s, ambient_visibility, world_diffuse, world_specular);
   /* Laid out as render/passes.py's LIGHTING_PASS_CHANNELS says: AO and Emission in the
    * alpha channels. */
   out_diffuse_light = vec4(light_pass(reflected_diffuse + world_diffuse, diffuse_color),
@@ -266,6 +276,6 @@ void main()
   out_color = vec4(color, 1.0);
   out_aux = vec4(sun_visibility, cascade, surface.view_depth, 1.0);
 #ifdef PASSES
-  write_surface_passes(surface, px, ambient_visibility);
+  write_surface_passes(surface, ambient_visibility);
 #endif
 }
