@@ -65,6 +65,8 @@ class Pipeline:
         # Cryptomatte: each drawn sample's ID image, and the materials named in them.
         self.cryptomatte_samples = render_passes.CryptomatteSamples()
         self.cryptomatte_materials = set()
+        # The Normal pass of an anti-aliased render: the first (unjittered) sample's.
+        self.first_sample_normals = None
 
     @property
     def profile(self):
@@ -239,6 +241,7 @@ class Pipeline:
                                        colors=(color, aux) + pass_textures)
         self.cryptomatte_samples = render_passes.CryptomatteSamples()
         self.cryptomatte_materials = set()
+        self.first_sample_normals = None
         # No clear: every path writes every pixel of both targets (background and lighting
         # programs between them, or a debug view, or FXAA / the sample average).
         samples = max(int(snap.settings.render_samples), 1)
@@ -255,6 +258,8 @@ class Pipeline:
             reads = dict(reads, **{name: 4 for name in render_passes.LIGHTING_PASS_TARGETS})
         images = read_images(snap, reads, final_fb, combined_fb, self.gbuffer_fb,
                              with_positions)
+        if self.first_sample_normals is not None:
+            images["normal"] = self.first_sample_normals
         metadata = {}
         if passes.any:
             images.update(render_passes.collect(snap, passes, images, self.cryptomatte_samples))
