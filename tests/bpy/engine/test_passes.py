@@ -302,3 +302,17 @@ def test_cryptomatte_metadata_reaches_the_openexr_header(empty_scene, tmp_path):
         entry = f'"{name}":"{cryptomatte.murmurhash3_32(name):08x}"'.encode()
         assert entry in header, f"{name} missing from the manifest"
     assert b"CryptoObject00" in header
+
+
+def test_geometry_passes_are_the_pixel_centres_with_render_samples(empty_scene):
+    """Depth, Normal and Position of a 4-sample render are the unjittered sample's: the
+    one-sample render's values, never a blend of two surfaces at an edge."""
+    scene = empty_scene
+    _scene(scene)
+    layer = scene.view_layers[0]
+    layer.use_pass_z = layer.use_pass_normal = layer.use_pass_position = True
+    one = _csm(scene).images
+    scene.csm.render_samples = 4
+    four = _csm(scene).images
+    for name in ("Depth", "Normal", "Position"):
+        assert np.array_equal(one[name], four[name]), name
