@@ -196,11 +196,11 @@ vec3 light_pass(vec3 reflected, vec3 layer_color)
               layer_color.b > 0.0 ? reflected.b / layer_color.b : 0.0);
 }
 
-#ifdef PASSES
 /* The passes of surface s, whose World light reached it by `ambient_visibility` (its AO),
- * the World's share split by ambient_light_split. */
+ * the World's share split by ambient_light_split. Nothing outside PASSES programs. */
 void write_surface_passes(Surface s, float ambient_visibility)
 {
+#ifdef PASSES
   vec3 diffuse_color = surface_diffuse_color(s);
   vec3 specular_color = surface_specular_color(s);
   vec3 world_diffuse;
@@ -214,8 +214,8 @@ void write_surface_passes(Surface s, float ambient_visibility)
                             s.emission.r);
   out_diffuse_color = vec4(diffuse_color, s.emission.g);
   out_specular_color = vec4(specular_color, s.emission.b);
-}
 #endif
+}
 
 /* The passes where no surface is (the World, a debug view's map): all zero; Environment is
  * Combined there (render/passes.py). */
@@ -275,7 +275,5 @@ void main()
 #endif
   out_color = vec4(color, 1.0);
   out_aux = vec4(sun_visibility, cascade, surface.view_depth, 1.0);
-#ifdef PASSES
   write_surface_passes(surface, ambient_visibility);
-#endif
 }
