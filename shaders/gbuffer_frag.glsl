@@ -5,7 +5,9 @@
  * out_depth    = view depth along the camera's forward axis (0 = background)
  * out_facet    = the triangle's own normal xyz (on the shading normal's side), the
  *                object's Shadow Terminator Geometry Offset
- * out_emission = emitted radiance rgb (W/m^2/sr, EEVEE's units), metallic */
+ * out_emission = emitted radiance rgb (W/m^2/sr, EEVEE's units), metallic
+ * out_ids      = (CRYPTOMATTE programs only) the object's, material's and asset's
+ *                Cryptomatte IDs (core/cryptomatte.py), 1 */
 
 #include "alpha_hash.glsl"
 
@@ -100,4 +102,7 @@ void main()
   vec3 facet = cross(dFdx(world_position), dFdy(world_position));
   facet = dot(facet, facet) > 1e-30 ? normalize(facet) : n;
   out_facet = vec4(dot(facet, n) < 0.0 ? -facet : facet, terminator_offset);
+#ifdef CRYPTOMATTE
+  out_ids = vec4(cryptomatte_object, cryptomatte_material, cryptomatte_asset, 1.0);
+#endif
 }

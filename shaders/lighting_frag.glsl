@@ -5,7 +5,9 @@
  * One program per Shadow Filter (SHADOW_FILTER), each with twins that have the point-light
  * loop (POINT_LIGHTS), the shadowed point lights (POINT_SHADOWS), the spot-light loop
  * (SPOT_LIGHTS) and the debug views (WITH_DEBUG_VIEWS) (render/shaders.py): llvmpipe pays
- * for code it skips, so a program holds only what its scene uses. */
+ * for code it skips, so a program holds only what its scene uses. Each also has a PASSES
+ * twin, for final renders with render passes on: it writes the light and colour passes
+ * (render/passes.py lists the targets) besides Combined. */
 #include "surface.glsl"
 #include "brdf.glsl"
 #include "lights.glsl"
@@ -21,6 +23,27 @@ vec3 surface_response(Surface s, vec3 l)
   return surface_brdf(s.albedo, s.metallic, s.specular, s.shininess, s.normal, l, s.to_camera);
 }
 
+#ifdef PASSES
+/* What the diffuse and specular layers reflect of every light so far (W/m^2/sr), for the
+ * Diffuse and Glossy Light passes. */
+vec3 reflected_diffuse = vec3(0.0);
+vec3 reflected_specular = vec3(0.0);
+#endif
+
+/* The light passes' share of a light whose irradiance on a surface facing it is
+ * `irradiance`, from direction l: the same light Combined adds through surface_response,
+ * split by layer. Nothing outside PASSES programs. */
+void add_to_light_passes(Surface s, vec3 l, vec3 irradiance)
+{
+#ifdef PASSES
+  vec3 diffuse;
+  vec3 specular;
+  surface_response_split(s, l, diffuse, specular);
+  reflected_diffuse += irradiance * diffuse;
+  reflected_specular += irradiance * specular;
+#endif
+}
+
 /* The World's light on surface s, darkened by ambient occlusion (its share of the light
  * reaching s in `visibility`). */
 vec3 ambient_light(Surface s, ivec2 px, out float visibility)
@@ -31,6 +54,17 @@ vec3 ambient_light(Surface s, ivec2 px, out float visibility)
   visibility = frame.ao_enabled != 0 ?
       mix(1.0, ambient_occlusion_at(px, s.view_depth, s.depth_slope), frame.ao_strength) : 1.0;
   return color * visibility;
+}
+
+/* ambient_light in its diffuse and specular parts, for the light passes (the two add up
+ * to what ambient_light returns for the same `visibility`): the World times the diffuse
+ * layer's colour is the diffuse part; the rest of albedo x World (a metal's, which has no
+ * diffuse layer) the specular. Change both together. */
+void ambient_light_split(Surface s, float visibility, out vec3 diffuse, out vec3 specular)
+{
+  vec3 world = frame.ambient_color * visibility;
+  diffuse = world * surface_diffuse_color(s);
+  specular = world * s.albedo - diffuse;
 }
 
 /* Adds the sun's light on surface s to `color`, through its cascaded shadow maps. Returns
@@ -81,6 +115,7 @@ void add_sun(inout Surface s, inout vec3 color, out float visibility, out float 
   }
   if (frame.has_sun != 0) {
     color += frame.sun_color * surface_response(s, sun_l) * sun_vis;
+    add_to_light_passes(s, sun_l, frame.sun_color * sun_vis);
   }
   visibility = sun_vis;
 }
@@ -111,6 +146,7 @@ void add_point_light_range(Surface s, int first, int end, const bool shadowed,
       }
 #endif
       color += light.color * attenuation * vis * surface_response(s, l);
+      add_to_light_passes(s, l, light.color * attenuation * vis);
     }
   }
 }
@@ -145,8 +181,52 @@ void add_spot_lights(Surface s, inout vec3 color)
                                      spot.source_radius);
       }
       color += spot.color * attenuation * vis * surface_response(s, l);
+      add_to_light_passes(s, l, spot.color * attenuation * vis);
     }
   }
+}
+
+/* A light pass: reflected light / the layer's colour where that is above zero, as
+ * Blender defines Diffuse and Glossy Light (so light x colour gives the reflected light
+ * back); 0 elsewhere, where the layer reflects nothing. */
+vec3 light_pass(vec3 reflected, vec3 layer_color)
+{
+  return vec3(layer_color.r > 0.0 ? reflected.r / layer_color.r : 0.0,
+              layer_color.g > 0.0 ? reflected.g / layer_color.g : 0.0,
+              layer_color.b > 0.0 ? reflected.b / layer_color.b : 0.0);
+}
+
+/* The passes of surface s, whose World light reached it by `ambient_visibility` (its AO),
+ * the World's share split by ambient_light_split. Nothing outside PASSES programs. */
+void write_surface_passes(Surface s, float ambient_visibility)
+{
+#ifdef PASSES
+  vec3 diffuse_color = surface_diffuse_color(s);
+  vec3 specular_color = surface_specular_color(s);
+  vec3 world_diffuse;
+  vec3 world_specular;
+  ambient_light_split(s, ambient_visibility, world_diffuse, world_specular);
+  /* Laid out as render/passes.py's LIGHTING_PASS_CHANNELS says: AO and Emission in the
+   * alpha channels. */
+  out_diffuse_light = vec4(light_pass(reflected_diffuse + world_diffuse, diffuse_color),
+                           ambient_visibility);
+  out_specular_light = vec4(light_pass(reflected_specular + world_specular, specular_color),
+                            s.emission.r);
+  out_diffuse_color = vec4(diffuse_color, s.emission.g);
+  out_specular_color = vec4(specular_color, s.emission.b);
+#endif
+}
+
+/* The passes where no surface is (the World, a debug view's map): all zero; Environment is
+ * Combined there (render/passes.py). */
+void write_no_surface_passes()
+{
+#ifdef PASSES
+  out_diffuse_light = vec4(0.0, 0.0, 0.0, 1.0);
+  out_specular_light = vec4(0.0);
+  out_diffuse_color = vec4(0.0);
+  out_specular_color = vec4(0.0);
+#endif
 }
 
 void main()
@@ -158,6 +238,7 @@ void main()
   if (shadow_map_view(pixel, map_color)) {
     out_color = vec4(map_color, 1.0);
     out_aux = vec4(1.0, -1.0, 0.0, 1.0);
+    write_no_surface_passes();
     return;
   }
 #endif
@@ -167,6 +248,7 @@ void main()
     /* Background: the World colour; alpha 0 with Film > Transparent. */
     out_color = vec4(frame.background_color, frame.background_alpha);
     out_aux = vec4(1.0, -1.0, 1e10, 0.0);
+    write_no_surface_passes();
     return;
   }
 
@@ -193,4 +275,5 @@ void main()
 #endif
   out_color = vec4(color, 1.0);
   out_aux = vec4(sun_visibility, cascade, surface.view_depth, 1.0);
+  write_surface_passes(surface, ambient_visibility);
 }

@@ -2,9 +2,9 @@
 
 Owns the shims: reading mesh data through generic attributes where they exist (3.5+, one
 memory copy) and through the older per-element paths before; corner normals (4.1+) versus
-``calc_normals_split``; RenderResult passes that take a flat array (4.x+) or rows (3.4);
-the Principled BSDF's renamed specular and emission inputs; material alpha, shadow and
-culling settings (``blend_method``/``shadow_method`` up to 4.1, ``surface_render_method``/
+``calc_normals_split``; RenderResult passes that take a flat array (4.x+) or rows (3.4),
+and render pass names (spelled out in 5.0, short before); the Principled BSDF's renamed
+specular and emission inputs; material alpha, shadow and culling settings (``blend_method``/``shadow_method`` up to 4.1, ``surface_render_method``/
 ``use_transparent_shadow`` from 4.2); MikkTSpace tangents; the glTF importer of 3.4/3.5 that needs
 ``np.bool``; node groups' sockets (``interface`` from 4.0); an object's Shadow Terminator
 Geometry Offset (Object in 5.0, the Cycles
@@ -195,6 +195,20 @@ def new_node_group_socket(tree, name, in_out, socket_type):
         return interface.new_socket(name, in_out=in_out, socket_type=socket_type)
     sockets = tree.inputs if in_out == 'INPUT' else tree.outputs
     return sockets.new(socket_type, name)
+
+
+# Blender 5.0 spells render passes out; 3.4 .. 4.x use short names (checked on 4.2 and 5.0:
+# the compositor's Render Layers sockets with EEVEE).
+_SHORT_PASS_NAMES = {"Diffuse Direct": "DiffDir", "Diffuse Color": "DiffCol",
+                     "Glossy Direct": "GlossDir", "Glossy Color": "GlossCol",
+                     "Emission": "Emit", "Environment": "Env", "Ambient Occlusion": "AO"}
+
+
+def render_pass_name(name):
+    """This Blender's name of the render pass Blender 5.0 calls ``name``."""
+    if bpy.app.version >= (5, 0, 0):
+        return name
+    return _SHORT_PASS_NAMES.get(name, name)
 
 
 def write_pass(render_pass, pixels):

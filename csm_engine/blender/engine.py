@@ -25,7 +25,7 @@ from ..core.view_state import ShadowViewState
 from ..render import gpu_mesh, overlays, pipeline, shaders
 from ..render.resources import RenderResources
 from ..render.result import RenderResult
-from . import compat, mesh_cache, snapshot
+from . import compat, mesh_cache, render_passes, snapshot
 
 # Render targets and shadow atlas kept from one final render to the next, with the record
 # of what they hold (each render gets a new engine instance and GPU context; textures,
@@ -128,15 +128,15 @@ def _simplify(scene):
             getattr(render, "simplify_subdivision_render", None))
 
 
-def _reads(depsgraph, keep_images):
+def _reads(wanted, keep_images):
     """What the final render reads back: Combined always; the aux target (Shadow, Cascade,
     then Depth) with as many channels as the enabled passes use; normals only for the
-    Normal pass. ``keep_images`` reads every channel (tests look at all of them)."""
+    Normal pass (the other passes add their own reads: ``Pipeline.render_offscreen``).
+    ``keep_images`` reads every channel (tests look at all of them)."""
     if keep_images:
         return {"combined": 4, "aux": 4, "normal": 4}
-    layer = depsgraph.view_layer
-    reads = {"combined": 4, "aux": 3 if getattr(layer, "use_pass_z", False) else 2}
-    if getattr(layer, "use_pass_normal", False):
+    reads = {"combined": 4, "aux": 3 if "Depth" in wanted.names else 2}
+    if "Normal" in wanted.names:
         reads["normal"] = 3
     return reads
 
@@ -166,13 +166,7 @@ class CSMRenderEngine(bpy.types.RenderEngine):
 
     # -- final render ----------------------------------------------------------------------
     def update_render_passes(self, scene=None, renderlayer=None):
-        self.register_pass(scene, renderlayer, "Combined", 4, "RGBA", 'COLOR')
-        if renderlayer.use_pass_z:
-            self.register_pass(scene, renderlayer, "Depth", 1, "Z", 'VALUE')
-        if renderlayer.use_pass_normal:
-            self.register_pass(scene, renderlayer, "Normal", 3, "XYZ", 'VECTOR')
-        self.register_pass(scene, renderlayer, "Shadow", 1, "X", 'VALUE')
-        self.register_pass(scene, renderlayer, "Cascade", 1, "X", 'VALUE')
+        render_passes.register(self, scene, renderlayer)
 
     def render(self, depsgraph):
         request = _ACTIVE_REQUEST[0] or _Request()
@@ -218,8 +212,9 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         renderer = pipeline.Pipeline(resources=_FINAL_RENDER_RESOURCES,
                                      view_state=_FINAL_RENDER_VIEW)
         renderer.profile = request.profile
-        result = renderer.render_offscreen(snap, cache, _reads(depsgraph, request.keep_images),
-                                           with_positions=request.keep_images)
+        wanted = render_passes.request(depsgraph.view_layer, scene.world)
+        result = renderer.render_offscreen(snap, cache, _reads(wanted, request.keep_images),
+                                           with_positions=request.keep_images, passes=wanted)
         result.timings.update(scene_read=scene_read, mesh_upload=mesh_upload)
         result.mesh_uploads, result.upload_bytes = gpu_mesh.uploads_since(
             cache.meshes.values(), mark)
@@ -231,26 +226,14 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         # Blender itself pastes it into the full frame unless Crop to Render Region is on.
         x0, y0, x1, y1 = render_region(scene.render, width, height)
         region_images = {name: image[y0:y1, x0:x1] for name, image in result.images.items()}
-        render_result = self.begin_result(0, 0, x1 - x0, y1 - y0)
-        for name in ("Shadow", "Cascade"):
-            if render_result.layers[0].passes.find_by_name(name, "") is None:
-                try:
-                    self.add_pass(name, 1, "X")
-                except Exception:
-                    pass
-        passes = render_result.layers[0].passes
-        images = region_images
-        aux = images["aux"]
-        compat.write_pass(passes["Combined"], images["combined"])
-        pass_pixels = {"Shadow": aux[..., 0:1], "Cascade": aux[..., 1:2]}
-        if aux.shape[2] > 2:
-            pass_pixels["Depth"] = aux[..., 2:3]
-        if "normal" in images:       # read back only when the Normal pass is on
-            pass_pixels["Normal"] = images["normal"][..., :3]
-        for name, pixels in pass_pixels.items():
-            render_pass = passes.find_by_name(name, "")
-            if render_pass is not None:
-                compat.write_pass(render_pass, pixels)
+        # Blender calls render() once per view layer: this one's passes go to its own layer.
+        render_result = self.begin_result(0, 0, x1 - x0, y1 - y0,
+                                          layer=depsgraph.view_layer.name)
+        compat.write_pass(render_result.layers[0].passes["Combined"],
+                          region_images["combined"])
+        aux = region_images["aux"]
+        region_images.update(Shadow=aux[..., 0:1], Cascade=aux[..., 1:2])
+        render_passes.write(self, render_result, region_images, wanted, result.metadata)
         self.end_result(render_result)
         result.timings["handoff"] = time.perf_counter() - t
         if not request.keep_images:

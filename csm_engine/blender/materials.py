@@ -122,6 +122,7 @@ def material_info(material):
     info = MaterialInfo()
     if material is None:
         return info
+    info.name = material.name
     info.base_color = tuple(material.diffuse_color)
     info.backface_culling = bool(getattr(material, "use_backface_culling", False))
     info.backface_culling_shadow = compat.material_backface_culling_shadow(material)

@@ -274,11 +274,12 @@ def take(depsgraph, camera, is_viewport=False):
             if fields is None:
                 # Blender 3.0+ per-object ray visibility, as EEVEE and Cycles honour it:
                 # hidden from the camera but still casting, or seen but casting no shadow.
-                # (key, visible_camera, casts_shadow, terminator_offset)
+                # (key, visible_camera, casts_shadow, terminator_offset, name, asset)
                 fields = per_object[key] = (
                     key, bool(getattr(obj, "visible_camera", True)),
                     bool(getattr(obj, "visible_shadow", True)),
-                    compat.terminator_geometry_offset(obj))
+                    compat.terminator_geometry_offset(obj), key,
+                    _asset_name(original or obj))
             rows.append(fields)
             # A copy: the instance (and a Matrix that wraps it) is reused by the iterator.
             matrices.append(instance.matrix_world.copy())
@@ -294,8 +295,9 @@ def take(depsgraph, camera, is_viewport=False):
     world_from_objects = np.fromiter(
         itertools.chain.from_iterable(itertools.chain.from_iterable(matrices)),
         dtype=np.float64, count=16 * len(matrices)).reshape(-1, 4, 4)
-    instances.extend(MeshInstance(key, matrix, visible_camera, casts_shadow, offset)
-                     for (key, visible_camera, casts_shadow, offset), matrix
+    instances.extend(MeshInstance(key, matrix, visible_camera, casts_shadow, offset, name,
+                                  asset)
+                     for (key, visible_camera, casts_shadow, offset, name, asset), matrix
                      in zip(rows, world_from_objects))
     # Shadow-casting point lights first: the plan gives the first ones cube maps, and the
     # lighting pass loops over them apart from the rest (a stable sort keeps their order).
@@ -306,6 +308,13 @@ def take(depsgraph, camera, is_viewport=False):
             warnings.append(f"{len(lights)} {kind} lights: CSM draws {limit}, "
                             f"{len(lights) - limit} are left out")
     return snap
+
+
+def _asset_name(obj):
+    """The name Cryptomatte Asset gives an object: its topmost parent's, as Blender's."""
+    while obj.parent is not None:
+        obj = obj.parent
+    return obj.name
 
 
 def _active_sun(depsgraph, suns):

@@ -60,6 +60,8 @@ class MeshInstance:
     casts_shadow: bool = True       # Object > Visibility > Ray Visibility > Shadow
     # Object > Shading > Shadow Terminator > Geometry Offset
     terminator_offset: float = DEFAULT_TERMINATOR_OFFSET
+    name: str = ""                  # the object's name (Cryptomatte Object)
+    asset: str = ""                 # its topmost parent's name (Cryptomatte Asset)
 
 
 @dataclass

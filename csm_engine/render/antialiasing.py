@@ -14,6 +14,7 @@ from typing import NamedTuple
 from ..core.antialiasing import jittered, sample_offsets
 from . import shaders
 from .overlays import draw_frozen_cascades, draw_overlays
+from .readback import read_target
 
 
 class Antialiased(NamedTuple):
@@ -49,21 +50,31 @@ def draw_viewport_fxaa(pipeline, snap, cache, width, height):
     return plan
 
 
-def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux):
+def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, request=None,
+                     pass_textures=()):
     """Final-render anti-aliasing into ``color`` (Combined) and ``aux`` (the auxiliary
     passes): FXAA on one sample, or ``samples`` jittered frames averaged into a running
     mean. Sample 0 is unjittered and writes ``aux``; later samples reuse its shadow plan,
-    so the shadow maps are drawn once. Returns ``Antialiased``."""
+    so the shadow maps are drawn once. The light and colour passes (``pass_textures``) are
+    averaged like Combined, and every sample gives its Cryptomatte IDs when ``request``
+    (``passes.PassRequest``) asks for them. Returns ``Antialiased``."""
     targets = pipeline.targets
     width, height = snap.camera.width, snap.camera.height
     lit = targets.texture("lit_final", (width, height), 'RGBA32F')
     depth = targets.gbuffer_depth(width, height)
-    first_fb = targets.framebuffer("lit_first", depth=depth, colors=(lit, aux))
+    first_fb = targets.framebuffer("lit_first_passes" if pass_textures else "lit_first",
+                                   depth=depth, colors=(lit, aux) + tuple(pass_textures))
+    offsets, weights = sample_offsets(samples, snap.pixel_filter_width) if not use_fxaa \
+        else (None, (1.0,))
     started = time.perf_counter()
     plan = pipeline.draw(snap, cache, first_fb, width, height, overlays=False,
-                         depth_tested=True)
+                         depth_tested=True, passes=request,
+                         lighting_passes=bool(pass_textures), sample_weight=weights[0])
     passes = pipeline.last_frame
     timings = dict(pipeline.timings)
+    if request is not None and "Normal" in request.names and not use_fxaa:
+        # Like Depth and Position, the Normal pass is the unjittered sample's.
+        pipeline.first_sample_normals = read_target(pipeline.gbuffer_fb, 1, width, height, 4)
     color_fb = targets.framebuffer("final_color_only", colors=(color,))
     t = time.perf_counter()
     if use_fxaa:
@@ -73,11 +84,13 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux):
         timings["total"] = timings.get("total", 0.0) + timings["fxaa"]
         return Antialiased(plan, color_fb, timings, passes)
     # A running mean ping-pongs between the final colour target and a second one.
-    offsets, weights = sample_offsets(samples, snap.pixel_filter_width)
     spare = targets.texture("accumulate", (width, height), 'RGBA32F')
     spare_fb = targets.framebuffer("accumulate", colors=(spare,))
     scratch_aux = targets.texture("lit_aux_scratch", (width, height), 'RGBA32F')
-    sample_fb = targets.framebuffer("lit_sample", depth=depth, colors=(lit, scratch_aux))
+    scratch_passes = tuple(targets.texture(f"{index}_pass_sample", (width, height), 'RGBA32F')
+                           for index in range(len(pass_textures)))
+    sample_fb = targets.framebuffer("lit_sample_passes" if pass_textures else "lit_sample",
+                                    depth=depth, colors=(lit, scratch_aux) + scratch_passes)
     targets.fullscreen_pass("accumulate", color_fb, width, height,
                             (("previous", lit), ("current", lit)), (("sample_share", 1.0),))
     accumulating = time.perf_counter() - t
@@ -87,7 +100,8 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux):
         sample = dataclasses.replace(snap, camera=jittered(snap.camera, offset),
                                      sample_index=index)
         pipeline.draw(sample, cache, sample_fb, width, height, plan=plan, overlays=False,
-                      depth_tested=True)
+                      depth_tested=True, passes=request, lighting_passes=bool(pass_textures),
+                      sample_weight=weight)
         passes = passes + pipeline.last_frame
         for name, value in pipeline.timings.items():
             if name != "total":
@@ -97,6 +111,9 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux):
         targets.fullscreen_pass("accumulate", other_fb, width, height,
                                 (("previous", mean), ("current", lit)),
                                 (("sample_share", float(weight / total)),))
+        for slot, (mean_pass, sample_pass) in enumerate(zip(pass_textures, scratch_passes)):
+            _accumulate_in_place(targets, slot, mean_pass, sample_pass,
+                                 float(weight / total), width, height)
         accumulating += time.perf_counter() - t
         mean, mean_fb, other, other_fb = other, other_fb, mean, mean_fb
     # The samples' own passes are added into shadow/gbuffer/lighting above; this step
@@ -105,3 +122,16 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux):
     timings["total"] = time.perf_counter() - started
     draw_overlays(snap, plan, mean_fb, width, height)
     return Antialiased(plan, mean_fb, timings, passes)
+
+
+def _accumulate_in_place(targets, slot, mean, sample, share, width, height):
+    """Move render pass ``slot``'s running mean ``mean`` towards ``sample`` by ``share``,
+    through a spare target (one cannot be read and written in one pass), so the passes stay
+    in the targets the final framebuffer reads."""
+    spare = targets.texture("accumulate_pass", (width, height), 'RGBA32F')
+    spare_fb = targets.framebuffer("accumulate_pass", colors=(spare,))
+    targets.fullscreen_pass("accumulate", spare_fb, width, height,
+                            (("previous", mean), ("current", sample)), (("sample_share", share),))
+    mean_fb = targets.framebuffer(f"accumulate_pass_{slot}", colors=(mean,))
+    targets.fullscreen_pass("accumulate", mean_fb, width, height,
+                            (("previous", spare), ("current", spare)), (("sample_share", 1.0),))

@@ -109,10 +109,11 @@ class DrawMaterial:
     shadow tile and a kept G-buffer record of it."""
     __slots__ = ("block", "textures", "textured", "writes_emission", "alpha_mode",
                  "shadow_mode", "backface_culling", "backface_culling_shadow", "shadow_key",
-                 "gbuffer_key")
+                 "gbuffer_key", "name")
 
     def __init__(self, block, textures, textured, writes_emission, alpha_mode, shadow_mode,
-                 backface_culling, backface_culling_shadow, shadow_key, gbuffer_key):
+                 backface_culling, backface_culling_shadow, shadow_key, gbuffer_key,
+                 name=""):
         self.block, self.textures, self.textured = block, textures, textured
         self.writes_emission = writes_emission
         self.alpha_mode, self.shadow_mode = alpha_mode, shadow_mode
@@ -120,6 +121,7 @@ class DrawMaterial:
         self.backface_culling_shadow = backface_culling_shadow
         self.shadow_key = shadow_key
         self.gbuffer_key = gbuffer_key
+        self.name = name            # the material's name (Cryptomatte Material)
 
 
 class MeshDraws(NamedTuple):
@@ -415,4 +417,4 @@ def _material(cache, mesh, slot, white, default_material, memo=None):
     return DrawMaterial(held[1], tuple(t or white for t in textures), any(loaded),
                         writes_emission, material.alpha_mode, material.shadow_mode,
                         material.backface_culling, material.backface_culling_shadow,
-                        shadow_key, gbuffer_key)
+                        shadow_key, gbuffer_key, material.name)

@@ -2,7 +2,8 @@
 
 Owns the G-buffer's targets (``GBuffer``): albedo+specular, normal+shininess, view depth
 (0 = background), the triangle's own normal+the object's Shadow Terminator Geometry Offset
-(facet), emission+metallic, and depth; materials are one uniform block each
+(facet), emission+metallic, depth and, for Cryptomatte passes only, each pixel's object,
+material and asset IDs (render/passes.py); materials are one uniform block each
 (core/material_layout.py). World positions are rebuilt from view depth where needed
 (``core.camera.world_positions``). Also owns ``GBufferContents``: what a G-buffer drawn now
 would hold, so that one the targets already hold is not drawn again (F12 after a shadow or
@@ -15,7 +16,7 @@ import numpy as np
 
 from ..core.frame_layout import FRAME_LAYOUT
 from ..core.shadow_plan import front_to_back
-from . import instancing, shaders
+from . import instancing, passes, shaders
 from .draw_lists import GBUFFER_PROGRAMS, MATERIAL_SAMPLERS
 from .resources import HeldGBuffer
 
@@ -32,6 +33,7 @@ class GBuffer(NamedTuple):
     facet: object
     depth: object
     framebuffer: object
+    ids: object = None      # Cryptomatte IDs (object, material, asset, 1), when asked for
 
 
 class GBufferContents(NamedTuple):
@@ -55,12 +57,13 @@ def programs_key():
 
 
 def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, width,
-                 height):
+                 height, ids=None):
     """Draw the camera's view of ``lists`` (``DrawLists``) at ``instances``' matrices
     (``InstanceArrays``) into the G-buffer targets, near to far, with the frame block
     ``frame_ubo`` (``frame_data`` as numpy). Keeps the targets as they are when they hold
-    what it would draw (the frame cache's ``gbuffer``). Returns (``GBuffer``, whether it
-    was kept)."""
+    what it would draw (the frame cache's ``gbuffer``). ``ids`` (``passes.DrawIds``): also
+    write the Cryptomatte IDs, with the CRYPTOMATTE programs into one more target (such a
+    G-buffer is always drawn, never kept). Returns (``GBuffer``, whether it was kept)."""
     albedo = targets.texture("albedo", (width, height), 'RGBA16F')
     normal = targets.texture("normal", (width, height), 'RGBA16F')
     view_depth = targets.texture("view_depth", (width, height), 'R32F')
@@ -70,7 +73,15 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     # Emission and metallic have a target only in frames that draw some: without it each
     # fragment writes a sixth less (llvmpipe: ~15 % of the G-buffer), and the lighting pass
     # reads an emission texture kept at zero.
-    if lists.writes_emission:
+    id_target = None
+    if ids is not None:
+        # The IDs take the fifth slot, so emission is always drawn in these frames.
+        id_target = targets.texture("cryptomatte_ids", (width, height), 'RGBA32F')
+        gbuffer_fb = targets.framebuffer("gbuffer_ids", depth=depth,
+                                         colors=(albedo, normal, view_depth, facet, emission,
+                                                 id_target))
+        targets.zeroed_emission = None
+    elif lists.writes_emission:
         gbuffer_fb = targets.framebuffer("gbuffer", depth=depth,
                                          colors=(albedo, normal, view_depth, facet, emission))
         targets.zeroed_emission = None
@@ -82,7 +93,8 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
             with emission_fb.bind():
                 targets.call(emission_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
             targets.zeroed_emission = emission
-    gbuffer = GBuffer(albedo, normal, view_depth, emission, facet, depth, gbuffer_fb)
+    gbuffer = GBuffer(albedo, normal, view_depth, emission, facet, depth, gbuffer_fb,
+                      id_target)
     # Near to far, so the early depth test skips the shading of hidden fragments.
     order = np.asarray(front_to_back(snap, instances.bounds_lo_hi), dtype=np.int64)
     order = order[np.fromiter((i.visible_camera for i in snap.instances), dtype=bool,
@@ -95,6 +107,8 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     drawn_into = (albedo, normal, view_depth, emission, depth, facet)
     contents = gbuffer_contents(targets, snap, cache, lists, order,
                                 instances.world_from_objects, terminator_offsets, frame_data)
+    if ids is not None:
+        contents = None
     held = frame_cache.gbuffer
     if targets.records and contents is not None and held is not None and \
             held.contents == contents and \
@@ -103,7 +117,7 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     if targets.records:
         frame_cache.forget_gbuffer()
     _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuffer_fb,
-          width, height)
+          width, height, ids)
     if contents is not None and targets.records:
         frame_cache.gbuffer = HeldGBuffer(drawn_into, contents)
     return gbuffer, False
@@ -130,7 +144,7 @@ def in_view(clip_from_world, bounds_lo_hi, rows, count):
 
 
 def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuffer_fb,
-          width, height):
+          width, height, ids=None):
     import gpu
     items = lists.items
     mirrored = instances.mirrored
@@ -139,7 +153,7 @@ def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuff
         rows = order[drawn[order]]
         if len(rows):
             per_program.append((program, _program_runs(lists, rows, mirrored,
-                                                        terminator_offsets)))
+                                                        terminator_offsets, ids is None)))
     matrices = _instanced_matrices(instances, per_program)
     with gbuffer_fb.bind():
         gpu.state.viewport_set(0, 0, width, height)
@@ -154,14 +168,19 @@ def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuff
             for run in runs:
                 index = int(run[0])
                 if len(run) > 1:
-                    shader = state.use(program, True, frame_ubo)
+                    shader = state.use(program, True, frame_ubo, False)
                     shader.uniform_sampler("instance_matrices", matrices)
                     shader.uniform_int("instance_offset", offset)
                     offset += len(run)
                 else:
-                    shader = state.use(program, False, frame_ubo)
+                    shader = state.use(program, False, frame_ubo, ids is not None)
                     shader.uniform_float("world_from_object",
                                          instances.world_from_objects_f32[index].tolist())
+                    if ids is not None:
+                        shader.uniform_float("cryptomatte_object",
+                                             float(ids.per_instance[index, 0]))
+                        shader.uniform_float("cryptomatte_asset",
+                                             float(ids.per_instance[index, 1]))
                 # Most objects share Blender's default: set only when it changes.
                 if terminator_offsets[index] != state.offset:
                     state.offset = terminator_offsets[index]
@@ -174,6 +193,9 @@ def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuff
                         state.culling = wanted
                     if material is not state.bound:
                         shader.uniform_block("material", material.block)
+                        if ids is not None:
+                            shader.uniform_float("cryptomatte_material",
+                                                 passes.material_id(ids, material.name))
                         if program.textured:
                             for name, texture in zip(MATERIAL_SAMPLERS, material.textures):
                                 shader.uniform_sampler(name, texture)
@@ -194,8 +216,9 @@ class _DrawState:
     def __init__(self):
         self.shader, self.bound, self.culling, self.offset = None, None, 'NONE', None
 
-    def use(self, program, instanced, frame_ubo):
-        shader = shaders.LIBRARY.get(program.program + ("_instanced" if instanced else ""))
+    def use(self, program, instanced, frame_ubo, with_ids):
+        shader = shaders.LIBRARY.get(program.program + ("_instanced" if instanced else "") +
+                                     ("_ids" if with_ids else ""))
         if shader is not self.shader:
             shader.bind()
             shader.uniform_block("frame", frame_ubo)
@@ -204,11 +227,12 @@ class _DrawState:
         return shader
 
 
-def _program_runs(lists, rows, mirrored, terminator_offsets):
+def _program_runs(lists, rows, mirrored, terminator_offsets, instancing_allowed=True):
     """One program's rows (near to far) as runs drawn together: copies of one mesh with
-    one winding and one Shadow Terminator Geometry Offset. Without instancing every row
-    is a run of its own, in order."""
-    if not lists.instancing:
+    one winding and one Shadow Terminator Geometry Offset. Without instancing (or when
+    each copy writes its own Cryptomatte IDs, ``instancing_allowed`` False) every row is a
+    run of its own, in order."""
+    if not lists.instancing or not instancing_allowed:
         return [rows[i:i + 1] for i in range(len(rows))]
     # The runs' key: the mesh's group, then the winding and the offset (few distinct).
     offsets = np.unique(terminator_offsets, return_inverse=True)[1].ravel()

@@ -47,6 +47,7 @@ class MaterialInfo:
     shadow_mode: str = "OPAQUE"                  # NONE, OPAQUE, CLIP, HASHED
     backface_culling: bool = False               # camera passes
     backface_culling_shadow: bool = False        # shadow pass
+    name: str = ""                               # the material's name (Cryptomatte)
     gpu_block: object = None                     # draw_lists: (flags, GPUUniformBuf, ...)
 
     @property

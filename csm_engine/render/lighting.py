@@ -26,30 +26,35 @@ def lighting_program(snap):
 
 
 def draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlusion,
-                  target_fb, width, height, depth_tested=False, overlays=True):
+                  target_fb, width, height, depth_tested=False, overlays=True,
+                  passes=False):
     """Shade ``gbuffer`` (``gbuffer.GBuffer``) with the shadow ``atlas``
     (``shadow_atlas.ShadowAtlas``) and ``ambient_occlusion`` (its ``AmbientOcclusion`` or
     None) into ``target_fb`` (None: the bound framebuffer). ``depth_tested``: the target
     has the G-buffer's depth attached. ``overlays``: then draw ``plan``'s frozen
-    cascades."""
+    cascades. ``passes``: draw with the PASSES programs, which also write the light and
+    colour passes into ``target_fb``'s colour slots 2.. (``passes.LIGHTING_PASS_TARGETS``).
+    """
     import gpu
     library = shaders.LIBRARY
     program = lighting_program(snap)
-    lighting = library.get(program)
+    debug = program.endswith("_debug")
+    suffix = "_passes" if passes else ""
+    lighting = library.get(program + suffix)
     # NOTE: with the G-buffer's depth attached to the target (``depth_tested``), the
     # lighting pass runs only where a surface is (its triangle lies on the far plane:
     # depth test GREATER), and a trivial program gives the background its colour (LESS
     # or EQUAL): llvmpipe skips the shading of pixel blocks that fail an early depth
     # test, so sky pixels stop paying for the whole lighting shader. The debug views
     # draw the shadow map over the background too, so they keep the plain pass.
-    depth_tested = depth_tested and not program.endswith("_debug")
+    depth_tested = depth_tested and not debug
     ao_texture = targets.white() if ambient_occlusion is None else ambient_occlusion.texture
 
     def light_pass():
         gpu.state.viewport_set(0, 0, width, height)
         gpu.state.depth_mask_set(False)
         if depth_tested:
-            background = library.get("background")
+            background = library.get("background" + suffix)
             gpu.state.depth_test_set('LESS_EQUAL')
             background.bind()
             background.uniform_block("frame", frame_ubo)

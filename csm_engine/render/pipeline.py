@@ -16,7 +16,9 @@ The passes, one module each:
 - ``lighting``: shading (and debug views) into the target;
 - ``overlays``: the frozen cascades' boxes;
 - ``antialiasing``: viewport FXAA, final-render FXAA or jittered samples;
-- ``readback``: a final render's images into numpy.
+- ``readback``: a final render's images into numpy;
+- ``passes``: the render passes a final render asked for (light and colour passes from the
+  lighting pass, Cryptomatte IDs from the G-buffer, the rest derived from the read-back).
 What they draw from is in ``draw_lists``; textures, framebuffers and the record of what the
 textures hold in ``resources``.
 
@@ -28,12 +30,12 @@ import time
 
 from ..core.shadow_plan import gbuffer_plan, pack_frame, plan_shadows
 from ..core.view_state import ShadowViewState
-from . import antialiasing, shaders
+from . import antialiasing, passes as render_passes, shaders
 from .ambient_occlusion import draw_ambient_occlusion
 from .draw_lists import HeldDrawLists
 from .gbuffer import draw_gbuffer
 from .lighting import draw_lighting
-from .readback import read_images
+from .readback import read_images, read_target
 # RenderTargetError: what the engine tells the user when a target cannot be allocated.
 from .resources import RenderTargetError, Targets  # noqa: F401
 from .result import PassCounts, RenderResult
@@ -62,6 +64,11 @@ class Pipeline:
         self.last_frame = PassCounts()  # what the last ``draw`` drew and kept
         self.last_plan = None           # the shadow plan the last ``draw`` used
         self.gbuffer_fb = None          # kept after draw() for the final render's read-back
+        # Cryptomatte: each drawn sample's ID image, and the materials named in them.
+        self.cryptomatte_samples = render_passes.CryptomatteSamples()
+        self.cryptomatte_materials = set()
+        # The Normal pass of an anti-aliased render: the first (unjittered) sample's.
+        self.first_sample_normals = None
 
     @property
     def profile(self):
@@ -103,7 +110,8 @@ class Pipeline:
         return time.perf_counter()
 
     def draw(self, snap, cache, target_fb=None, width=None, height=None, plan=None,
-             overlays=True, depth_tested=False):
+             overlays=True, depth_tested=False, passes=None, lighting_passes=False,
+             sample_weight=1.0):
         """Render one frame into ``target_fb`` (None: the currently bound framebuffer);
         returns the shadow plan (also ``last_plan``); ``last_frame`` says what it drew
         and kept.
@@ -112,7 +120,11 @@ class Pipeline:
         ``plan``: a shadow plan to reuse (the jittered samples of one final render share
         the plan of its unjittered camera, so their shadow maps are drawn once).
         ``overlays``: draw the frozen cascade boxes; anti-aliased frames draw them after
-        the anti-aliasing instead, so 1-pixel lines stay crisp."""
+        the anti-aliasing instead, so 1-pixel lines stay crisp.
+        ``passes`` (``passes.PassRequest``): with Cryptomatte layers, the G-buffer writes
+        IDs too and this sample's (of pixel-filter weight ``sample_weight``) are read into
+        ``cryptomatte_samples``. ``lighting_passes``: ``target_fb`` has the light and
+        colour passes' targets in colour slots 2.. and lighting writes them."""
         # Programs replaced by F5 or dropped with a library are freed here, in the context
         # that draws, never where they were retired (see the NOTE in shaders.py).
         shaders.release_retired()
@@ -154,9 +166,12 @@ class Pipeline:
                     nearest_blocks=nearest_blocks(targets, atlas, tiles.drawn))
             return tiles, atlas, self._sync(atlas.framebuffer, "shadow", t)
 
+        ids = render_passes.cryptomatte_draw_ids(snap) \
+            if passes is not None and passes.cryptomatte else None
+
         def gbuffer_pass(t):
             gbuffer, kept = draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo,
-                                         frame_data, width, height)
+                                         frame_data, width, height, ids)
             return gbuffer, kept, self._sync(gbuffer.framebuffer, "gbuffer", t)
 
         t = time.perf_counter()
@@ -175,13 +190,17 @@ class Pipeline:
             tiles, atlas, t = shadow_pass(atlas, t)
             gbuffer, gbuffer_kept, t = gbuffer_pass(t)
 
+        if ids is not None and targets.records:
+            self.cryptomatte_samples.add(read_target(gbuffer.framebuffer, 5, width, height, 3),
+                                         sample_weight)
+            self.cryptomatte_materials.update(ids.per_material)
         ambient_occlusion = draw_ambient_occlusion(targets, snap, frame_ubo, frame_data,
                                                    gbuffer, gbuffer_kept, width, height)
         if ambient_occlusion is not None:
             t = self._sync(ambient_occlusion.framebuffer, "ao", t)
 
         draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlusion,
-                      target_fb, width, height, depth_tested, overlays)
+                      target_fb, width, height, depth_tested, overlays, lighting_passes)
         if target_fb is not None:
             t = self._sync(target_fb, "lighting", t)
 
@@ -197,38 +216,60 @@ class Pipeline:
             return self.draw(snap, cache, None, width, height)
         return antialiasing.draw_viewport_fxaa(self, snap, cache, width, height)
 
-    def render_offscreen(self, snap, cache, reads=None, with_positions=False):
+    def render_offscreen(self, snap, cache, reads=None, with_positions=False,
+                         passes=render_passes.NO_PASSES):
         """Draw into offscreen float targets and read back only what ``reads`` names:
         image name ("combined", "aux", "normal") -> channels (1..4, from the first;
         default: combined and aux, RGBA); see ``readback.read_images``. With
         ``with_positions`` the G-buffer's world positions are added as "position" (tests
-        ray-cast from them). Returns a ``RenderResult`` with what the passes drew."""
+        ray-cast from them). ``passes`` (``passes.PassRequest``): the render passes to
+        draw and return too, under their (Blender 5.0) names, with the Cryptomatte
+        metadata. Returns a ``RenderResult`` with what the passes drew."""
         targets = self.targets
         width, height = snap.camera.width, snap.camera.height
         if reads is None:
             reads = {"combined": 4, "aux": 4}
         if with_positions:
             reads = dict(reads, aux=4)
+        if passes.names & render_passes.DERIVED_PASSES:
+            reads = dict(reads, combined=4, aux=4)
         color = targets.texture("final_color", (width, height), 'RGBA32F')
         aux = targets.texture("final_aux", (width, height), 'RGBA32F')
-        final_fb = targets.framebuffer("final", depth=targets.gbuffer_depth(width, height),
-                                       colors=(color, aux))
+        lighting_passes = passes.lighting
+        pass_textures = render_passes.lighting_pass_textures(targets, width, height) \
+            if lighting_passes else ()
+        final_fb = targets.framebuffer("final_passes" if lighting_passes else "final",
+                                       depth=targets.gbuffer_depth(width, height),
+                                       colors=(color, aux) + pass_textures)
+        self.cryptomatte_samples = render_passes.CryptomatteSamples()
+        self.cryptomatte_materials = set()
+        self.first_sample_normals = None
         # No clear: every path writes every pixel of both targets (background and lighting
         # programs between them, or a debug view, or FXAA / the sample average).
         samples = max(int(snap.settings.render_samples), 1)
         use_fxaa = samples == 1 and bool(snap.settings.fxaa)
         if samples == 1 and not use_fxaa:
-            plan = self.draw(snap, cache, final_fb, width, height, depth_tested=True)
-            combined_fb, passes = final_fb, self.last_frame
+            plan = self.draw(snap, cache, final_fb, width, height, depth_tested=True,
+                             passes=passes, lighting_passes=lighting_passes)
+            combined_fb, counts = final_fb, self.last_frame
         else:
-            plan, combined_fb, self.timings, passes = antialiasing.draw_antialiased(
-                self, snap, cache, samples, use_fxaa, color, aux)
+            plan, combined_fb, self.timings, counts = antialiasing.draw_antialiased(
+                self, snap, cache, samples, use_fxaa, color, aux, passes, pass_textures)
         t = time.perf_counter()
+        if lighting_passes:
+            reads = dict(reads, **{name: 4 for name in render_passes.LIGHTING_PASS_TARGETS})
         images = read_images(snap, reads, final_fb, combined_fb, self.gbuffer_fb,
                              with_positions)
+        if self.first_sample_normals is not None:
+            images["normal"] = self.first_sample_normals
+        metadata = {}
+        if passes.any:
+            images.update(render_passes.collect(snap, passes, images, self.cryptomatte_samples))
+            metadata = render_passes.cryptomatte_metadata(snap, passes,
+                                                          self.cryptomatte_materials)
         self.timings["readback"] = time.perf_counter() - t
         return RenderResult(images=images, plan=plan, timings=dict(self.timings),
-                            passes=passes, warnings=list(self.warnings))
+                            passes=counts, warnings=list(self.warnings), metadata=metadata)
 
 
 def _counts(targets, tiles, gbuffer_kept, ambient_occlusion):

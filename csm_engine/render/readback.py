@@ -8,18 +8,22 @@ positions that tests ray-cast from, rebuilt from the view depth.
 import numpy as np
 
 from ..core.camera import world_positions
+from .passes import LIGHTING_PASS_TARGETS
 
 # What each image is read from: (target, colour slot); the G-buffer's normal target is
 # the pipeline's own, the other two the final target's ("combined" from wherever the
 # anti-aliasing left it).
 READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("gbuffer", 1)}
+# The light and colour passes' targets, in the final target's colour slots 2.. when a
+# render asks for them (render/passes.py).
+READS.update({name: ("final", 2 + slot) for slot, name in enumerate(LIGHTING_PASS_TARGETS)})
 
 
 def read_images(snap, reads, final_fb, combined_fb, gbuffer_fb, with_positions=False):
-    """``reads``: image name ("combined", "aux", "normal") -> channels (1..4, from the
-    first). Returns name -> (H, W, channels) float32, bottom row first; with
-    ``with_positions`` also "position" (xyz world position, w coverage; needs "aux" with
-    4 channels)."""
+    """``reads``: image name ("combined", "aux", "normal", a ``LIGHTING_PASS_TARGETS``
+    name) -> channels (1..4, from the first). Returns name -> (H, W, channels) float32,
+    bottom row first; with ``with_positions`` also "position" (xyz world position, w
+    coverage; needs "aux" with 4 channels)."""
     import gpu
     width, height = snap.camera.width, snap.camera.height
     out = {}
@@ -44,3 +48,13 @@ def read_images(snap, reads, final_fb, combined_fb, gbuffer_fb, with_positions=F
         position[..., 3] = covered
         out["position"] = position
     return out
+
+
+def read_target(framebuffer, slot, width, height, channels):
+    """Colour slot ``slot`` of ``framebuffer`` as a (H, W, channels) float32 array, bottom
+    row first (the Cryptomatte IDs of each sample)."""
+    import gpu
+    buffer = gpu.types.Buffer('FLOAT', width * height * channels)
+    with framebuffer.bind():
+        framebuffer.read_color(0, 0, width, height, channels, slot, 'FLOAT', data=buffer)
+    return np.frombuffer(buffer, dtype=np.float32).reshape(height, width, channels)

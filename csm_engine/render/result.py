@@ -2,7 +2,7 @@
 
 Owns ``RenderResult``: the images read back (when asked for), the shadow plan used, seconds
 per step, what the passes drew and kept (``PassCounts``), the meshes it uploaded, warnings
-in the user's words, and the error that stopped the render (None on success). The pipeline
+in the user's words, the metadata the image carries (Cryptomatte's), and the error that stopped the render (None on success). The pipeline
 fills the GPU steps; the engine adds the Blender steps (reading the scene, syncing meshes)
 and hands it to the caller of ``render_final``.
 """
@@ -43,6 +43,7 @@ class RenderResult:
     upload_bytes: int = 0          # their vertex and index data
     warnings: list = field(default_factory=list)
     error: str = None
+    metadata: dict = field(default_factory=dict)  # key -> text for the image (Cryptomatte)
 
     @property
     def ok(self):

@@ -161,6 +161,20 @@ for _name in [name for name in PROGRAMS if name.startswith(("gbuffer", "shadow")
         samplers=_spec["samplers"] + (("FLOAT_2D", "instance_matrices"),),
         defines=_spec.get("defines", ()) + (("INSTANCED", "1"),))
 
+# Final renders with Cryptomatte passes draw the G-buffer with these twins (CRYPTOMATTE): a
+# sixth target holds each pixel's object, material and asset IDs, set per draw (so such a
+# G-buffer draws each copy on its own: there are no instanced twins of these).
+for _name in [name for name in PROGRAMS
+              if name.startswith("gbuffer") and not name.endswith("_instanced")]:
+    _spec = PROGRAMS[_name]
+    PROGRAMS[_name + "_ids"] = dict(
+        _spec, on_demand=True,
+        push=_spec["push"] + (("FLOAT", "cryptomatte_object"),
+                                     ("FLOAT", "cryptomatte_material"),
+                                     ("FLOAT", "cryptomatte_asset")),
+        outputs=_spec["outputs"] + (("VEC4", "out_ids"),),
+        defines=_spec.get("defines", ()) + (("CRYPTOMATTE", "1"),))
+
 # Screen-space ambient occlusion (ao_frag.glsl): the horizon search and a depth-aware blur,
 # both at half resolution; lighting brings it to full resolution and multiplies its ambient
 # term by the result.
@@ -198,6 +212,20 @@ for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
     PROGRAMS[_name + "_debug"] = dict(
         PROGRAMS[_name],
         defines=PROGRAMS[_name].get("defines", ()) + (("WITH_DEBUG_VIEWS", "1"),))
+
+# Final renders with render passes on draw with PASSES twins of the lighting and background
+# programs: four more targets (render/passes.py, LIGHTING_PASS_TARGETS) with the light and
+# colour passes, so a render without them pays for none of it. These twins and the
+# G-buffer's CRYPTOMATTE ones are compiled when first drawn (``on_demand``), not with the
+# library: they would double its compile time (about 1 s here) for renders that never use
+# them.
+PASS_OUTPUTS = (("VEC4", "out_diffuse_light"), ("VEC4", "out_specular_light"),
+                ("VEC4", "out_diffuse_color"), ("VEC4", "out_specular_color"))
+for _name in [name for name in PROGRAMS if name.startswith(("lighting", "background"))]:
+    _spec = PROGRAMS[_name]
+    PROGRAMS[_name + "_passes"] = dict(
+        _spec, on_demand=True, outputs=_spec["outputs"] + PASS_OUTPUTS,
+        defines=_spec.get("defines", ()) + (("PASSES", "1"),))
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
 
@@ -456,7 +484,8 @@ class ShaderLibrary:
         compiled = {}
         try:
             for name, spec in PROGRAMS.items():
-                compiled[name] = _build(name, spec, directory)
+                if not spec.get("on_demand"):
+                    compiled[name] = _build(name, spec, directory)
         except BaseException:
             _RETIRED.append(compiled)      # the programs that did compile, freed later
             raise
@@ -486,7 +515,11 @@ class ShaderLibrary:
     def get(self, name):
         if self._shaders is None:
             self._compile_first()
-        return self._shaders[name]
+        shader = self._shaders.get(name)
+        if shader is None:
+            # An on-demand program (see PROGRAMS), from the folder the others came from.
+            shader = self._shaders[name] = _build(name, PROGRAMS[name], self.compiled_from)
+        return shader
 
     def release(self):
         """Drop the compiled programs (they compile again on the next ``get``); like every
