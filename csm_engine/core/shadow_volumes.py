@@ -1,0 +1,173 @@
+"""Shadow volumes: the closed solids behind each caster, away from a light, as triangles.
+
+Owns the geometry of the Exact shadow filter (``render/shadow_volumes.py`` counts it per
+pixel): a mesh's topology (``mesh_topology``: welded corners, edges and whether the mesh is
+closed) and its volume for the sun (``sun_volume``: extrusion along the light's direction)
+or for a point or spot light (``point_volume``: extrusion along the rays from the light).
+
+A volume is the sum of one prism per casting triangle: the triangle itself (near cap,
+turned to face the light), the triangle pushed away from the light (far cap), and a side
+quad per edge. Where two casting triangles share an edge with opposite windings their side
+quads cancel, so only silhouette edges are extruded; an edge left with a net multiplicity
+of two (non-manifold meshes) is extruded twice. Which triangles cast:
+- a closed mesh (every edge shared by two triangles wound oppositely): the triangles facing
+  away from the light. Their caps lie on surfaces the light does not reach, so no lit
+  surface of the caster lies on its own volume's boundary (no self-shadowing speckle);
+- any other mesh (planes, cards, scans with holes, non-manifold edges): every triangle,
+  each turned to face the light (per-triangle volumes with generalized silhouettes).
+Faces are turned by the world-space winding, with a mirrored matrix (negative
+determinant) turning every winding around. Triangles whose corners weld together
+(repeated vertices) are dropped; flat triangles with three distinct corners are kept, their
+prisms are empty and their sides cancel.
+
+Every prism is oriented outward: a depth-fail counter adds one for each volume face seen
+from inside (back-facing) and subtracts one for each seen from outside (front-facing),
+behind the visible surface; a sum above zero is in shadow. numpy only, pure.
+"""
+
+from typing import NamedTuple
+
+import numpy as np
+
+
+class MeshTopology(NamedTuple):
+    """A mesh's corners welded by position (object space) and its edges."""
+    positions: np.ndarray       # (V, 3) float64, distinct positions
+    triangles: np.ndarray       # (T, 3) int64 indices into positions, no repeated corner
+    edges: np.ndarray           # (E, 2) int64, each undirected edge once, first < second
+    triangle_edges: np.ndarray  # (T, 3) index of edge (0-1, 1-2, 2-0) of each triangle
+    edge_signs: np.ndarray      # (T, 3) +1 where the triangle runs its edge first->second
+    closed: bool                # every edge in exactly two triangles, wound oppositely
+
+
+def mesh_topology(positions, triangles):
+    """The ``MeshTopology`` of ``positions`` (N, 3) and ``triangles`` (T, 3) indices:
+    corners at one position welded (a GPU mesh splits them at UV seams and sharp edges),
+    triangles with a repeated corner dropped."""
+    positions = np.asarray(positions, dtype=np.float64).reshape(-1, 3)
+    triangles = np.asarray(triangles, dtype=np.int64).reshape(-1, 3)
+    if len(positions) == 0 or len(triangles) == 0:
+        empty = np.zeros((0, 3), dtype=np.int64)
+        return MeshTopology(np.zeros((0, 3)), empty, np.zeros((0, 2), dtype=np.int64),
+                            empty, empty, False)
+    welded, first = np.unique(positions, axis=0, return_inverse=True)
+    tris = first.reshape(-1)[triangles]
+    keep = (tris[:, 0] != tris[:, 1]) & (tris[:, 1] != tris[:, 2]) & \
+        (tris[:, 2] != tris[:, 0])
+    tris = tris[keep]
+    directed = np.stack([tris, np.roll(tris, -1, axis=1)], axis=2).reshape(-1, 2)
+    low = directed.min(axis=1)
+    high = directed.max(axis=1)
+    signs = np.where(directed[:, 0] == low, 1, -1).astype(np.int64)
+    keys = low * len(welded) + high
+    unique_keys, edge_of, uses = np.unique(keys, return_inverse=True, return_counts=True)
+    edge_of = edge_of.reshape(-1)
+    edges = np.stack([unique_keys // len(welded), unique_keys % len(welded)], axis=1)
+    net = np.bincount(edge_of, weights=signs, minlength=len(unique_keys))
+    closed = bool(len(tris)) and bool(np.all(uses == 2)) and bool(np.all(net == 0))
+    return MeshTopology(welded, tris, edges, edge_of.reshape(-1, 3), signs.reshape(-1, 3),
+                        closed)
+
+
+def _world(topology, world_from_object):
+    m = np.asarray(world_from_object, dtype=np.float64)
+    world = topology.positions @ m[:3, :3].T + m[:3, 3]
+    mirrored = np.linalg.det(m[:3, :3]) < 0.0
+    return world, mirrored
+
+
+def _casting(topology, world, mirrored, facing_light):
+    """Which triangles cast (see the module docstring) and which must be turned around to
+    face the light; ``facing_light(corners, normals)``: per triangle, how much its
+    world-space winding faces the light (positive: towards it)."""
+    tris = topology.triangles
+    a, b, c = world[tris[:, 0]], world[tris[:, 1]], world[tris[:, 2]]
+    normals = np.cross(b - a, c - a)
+    facing = facing_light(a, normals)
+    if topology.closed:
+        # A mirror turns every winding around: the mesh's outside is the other side.
+        casting = (facing > 0.0) if mirrored else (facing < 0.0)
+    else:
+        casting = facing != 0.0
+    # Turned by the world-space winding, which is what the counter sees.
+    return casting, facing < 0.0
+
+
+def _prisms(topology, world, casting, turned, far):
+    """Triangle soup (N, 3) float32 of the casting triangles' prisms with shared sides
+    cancelled; ``far``: (V, 3) each welded corner pushed away from the light."""
+    tris = topology.triangles[casting]
+    turned = turned[casting]
+    # Wound to face the light: the near cap's outward side is towards it.
+    oriented = np.where(turned[:, None], tris[:, [0, 2, 1]], tris)
+    near_caps = world[oriented]
+    far_caps = far[oriented[:, [0, 2, 1]]]
+    # Net winding of each edge over the casting triangles: +1 per run first->second.
+    signs = topology.edge_signs[casting] * np.where(turned, -1, 1)[:, None]
+    net = np.bincount(topology.triangle_edges[casting].reshape(-1),
+                      weights=signs.reshape(-1).astype(np.float64),
+                      minlength=len(topology.edges)).astype(np.int64)
+    used = np.nonzero(net)[0]
+    counts = np.abs(net[used])
+    runs = topology.edges[used]
+    runs = np.where((net[used] > 0)[:, None], runs, runs[:, ::-1])
+    runs = np.repeat(runs, counts, axis=0)
+    p, q = runs[:, 0], runs[:, 1]
+    # For a near-cap edge p->q (counter-clockwise seen from the light), the outward side
+    # quad is q, p, p', q'.
+    sides = np.stack([world[q], world[p], far[p], world[q], far[p], far[q]], axis=1)
+    soup = np.concatenate([near_caps.reshape(-1, 3), far_caps.reshape(-1, 3),
+                           sides.reshape(-1, 3)])
+    return np.ascontiguousarray(soup, dtype=np.float32)
+
+
+def sun_volume(topology, world_from_object, to_light, extrusion):
+    """The shadow volume of one mesh instance under the sun: triangles (N, 3) float32 in
+    world space, 3 rows per triangle. ``to_light``: unit vector towards the sun;
+    ``extrusion``: how far (scene units) the far caps lie behind the casters: at least the
+    scene bounds' diagonal, so every receiver a caster can shade is inside."""
+    to_light = np.asarray(to_light, dtype=np.float64)
+    world, mirrored = _world(topology, world_from_object)
+    casting, turned = _casting(topology, world, mirrored,
+                               lambda corners, normals: normals @ to_light)
+    far = world - to_light * float(extrusion)
+    return _prisms(topology, world, casting, turned, far)
+
+
+# A far cap whose plane passes closer to the light than this share of its corners'
+# distance is pushed out no further (a triangle seen almost edge-on from the light: its
+# volume is a sliver).
+_MIN_FAR_CAP_SHARE = 1e-3
+
+
+def point_volume(topology, world_from_object, light_position, reach):
+    """The shadow volume of one mesh instance under a point or spot light at
+    ``light_position``: triangles (N, 3) float32 in world space. ``reach``: the farthest
+    distance from the light (scene units) a receiver can be (the scene bounds' farthest
+    corner). Corners are pushed along the rays from the light to a common distance, far
+    enough that every far cap's plane is beyond ``reach`` (a far cap is a chord of that
+    sphere, nearer the light in its middle than at its corners)."""
+    light = np.asarray(light_position, dtype=np.float64)
+    world, mirrored = _world(topology, world_from_object)
+    rays = world - light
+    distances = np.linalg.norm(rays, axis=1)
+    scale = max(float(reach), float(distances.max(initial=0.0)), 1e-9)
+    touching = distances <= 1e-9 * scale
+    directions = rays / np.where(touching, 1.0, distances)[:, None]
+    casting, turned = _casting(topology, world, mirrored,
+                               lambda corners, normals: np.einsum(
+                                   "ij,ij->i", normals, light - corners))
+    # A triangle through the light's own position casts no shadow it could be drawn with.
+    casting &= ~touching[topology.triangles].any(axis=1)
+    tris = topology.triangles[casting]
+    share = 1.0
+    if len(tris):
+        ua, ub, uc = directions[tris[:, 0]], directions[tris[:, 1]], directions[tris[:, 2]]
+        plane = np.cross(ub - ua, uc - ua)
+        length = np.linalg.norm(plane, axis=1)
+        ok = length > 0.0
+        if ok.any():
+            heights = np.abs(np.einsum("ij,ij->i", plane[ok], ua[ok])) / length[ok]
+            share = max(float(heights.min()), _MIN_FAR_CAP_SHARE)
+    far = light + directions * (scale / share * 1.01)
+    return _prisms(topology, world, casting, turned, far)
