@@ -60,6 +60,13 @@ void add_sun(inout Surface s, inout vec3 color, out float visibility, out float 
   float sun_vis = (sun_shadowed && sun_n_dot_l <= 0.0) ? 0.0 : 1.0;
   int sun_lookups = (sun_shadowed && sun_tile >= 0 && sun_n_dot_l > 0.0) ?
                     (next_weight > 0.0 ? 2 : 1) : 0;
+#if SHADOW_FILTER == FILTER_EXACT
+  /* Exact: the counted shadow volumes, everywhere (no cascades, no shadow distance). */
+  sun_lookups = 0;
+  if (sun_shadowed && sun_n_dot_l > 0.0) {
+    sun_vis = volume_visibility(ivec2(gl_FragCoord.xy));
+  }
+#endif
 
   /* NOTE: llvmpipe runs both sides of an `if` (and one pass of any loop) for every pixel,
    * but leaves a loop once no pixel of its group needs another pass: in this loop a pixel

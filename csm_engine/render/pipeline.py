@@ -12,6 +12,8 @@ The passes, one module each:
 - ``gbuffer``: what the camera sees, per pixel;
 - ``visible_depth``: the G-buffer's depth range per block, for Fit to Visible Depth;
 - ``ambient_occlusion``: half-resolution AO from the G-buffer;
+- ``shadow_volumes``: the sun's shadow volumes counted per pixel (Filter Exact, and the
+  Shadow error view);
 - ``lighting``: shading (and debug views) into the target;
 - ``overlays``: the frozen cascades' boxes;
 - ``antialiasing``: viewport FXAA, final-render FXAA or jittered samples;
@@ -37,6 +39,7 @@ from .readback import read_images
 from .resources import RenderTargetError, Targets  # noqa: F401
 from .result import PassCounts, RenderResult
 from .shadow_atlas import allocate_atlas, draw_shadow_atlas
+from .shadow_volumes import ShadowVolumes, draw_shadow_volumes, needs_volumes
 from .visible_depth import VisibleDepth
 
 
@@ -55,6 +58,7 @@ class Pipeline:
         self.view_state = ShadowViewState() if view_state is None else view_state
         self.draw_lists = HeldDrawLists()
         self.visible_depth = VisibleDepth()
+        self.shadow_volumes = ShadowVolumes()   # the Exact filter's geometry, kept
         self.warnings = []
         self.timings = {}
         self.last_frame = PassCounts()  # what the last ``draw`` drew and kept
@@ -178,8 +182,15 @@ class Pipeline:
         if ambient_occlusion is not None:
             t = self._sync(ambient_occlusion.framebuffer, "ao", t)
 
+        volume_count = None
+        if needs_volumes(snap):
+            volume_count, volume_fb = draw_shadow_volumes(
+                targets, self.shadow_volumes, snap, cache, bounds, frame_ubo, gbuffer,
+                width, height)
+            t = self._sync(volume_fb, "shadow_volumes", t)
+
         draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlusion,
-                      target_fb, width, height, depth_tested, overlays)
+                      target_fb, width, height, depth_tested, overlays, volume_count)
         if target_fb is not None:
             t = self._sync(target_fb, "lighting", t)
 
