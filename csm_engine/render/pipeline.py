@@ -58,12 +58,19 @@ class Pipeline:
         self.view_state = ShadowViewState() if view_state is None else view_state
         self.draw_lists = HeldDrawLists()
         self.visible_depth = VisibleDepth()
-        self.shadow_volumes = ShadowVolumes()   # the Exact filter's geometry, kept
         self.warnings = []
         self.timings = {}
         self.last_frame = PassCounts()  # what the last ``draw`` drew and kept
         self.last_plan = None           # the shadow plan the last ``draw`` used
         self.gbuffer_fb = None          # kept after draw() for the final render's read-back
+
+    @property
+    def shadow_volumes(self):
+        """The Exact filter's volume geometry, kept with the resources (``ShadowVolumes``)."""
+        resources = self.targets.resources
+        if resources.shadow_volumes is None:
+            resources.shadow_volumes = ShadowVolumes()
+        return resources.shadow_volumes
 
     @property
     def profile(self):

@@ -1,0 +1,138 @@
+"""Filter Exact (shadow volumes) against a CPU ray cast toward the sun, pixel by pixel, on
+small scenes built with plain operators; and the Shadow error view against the same ray
+cast.
+
+The ray cast (``tests/bpy/scenes.py``) starts at each pixel's G-buffer position, the very
+point the volume count was taken at, so the two may disagree only where a shadow edge
+passes within rounding of a pixel's centre: such pixels are left out, and only they (a
+pixel whose 3x3 neighbourhood in the ray cast is all lit or all shadowed is always
+counted)."""
+
+import bpy
+import numpy as np
+from mathutils import Vector
+
+from tests.bpy.bpy_helpers import render_result, viewport_frame
+from tests.bpy.scenes import (add_box, add_camera, add_ground, add_sun, ray_cast_shadowed,
+                              world_bvh)
+
+
+def _exact(scene, width=240, height=160):
+    scene.csm.shadow_filter = 'EXACT'
+    scene.csm.fxaa = False
+    return render_result(scene, width, height)
+
+
+def _sun_truth(scene, images, to_light):
+    """Per covered, sun-facing pixel (rows, cols): the ray cast's shadowed and whether the
+    pixel is clear of a shadow edge (its 3x3 neighbourhood agrees in the ray cast)."""
+    position, normal = images["position"], images["normal"][..., :3]
+    covered = position[..., 3] > 0.5
+    facing = covered & ((normal @ np.asarray(to_light, np.float32)) > 0.05)
+    rows, cols = np.nonzero(covered)
+    shadowed = np.zeros(covered.shape, dtype=bool)
+    shadowed[rows, cols] = ray_cast_shadowed(world_bvh(scene), position[rows, cols, :3],
+                                             normal[rows, cols], to_light)
+    padded = np.pad(shadowed, 1, mode="edge")
+    padded_cover = np.pad(covered, 1, mode="constant")
+    height, width = shadowed.shape
+    window = [padded[1 + dy:1 + dy + height, 1 + dx:1 + dx + width]
+              for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+    cover = [padded_cover[1 + dy:1 + dy + height, 1 + dx:1 + dx + width]
+             for dy in (-1, 0, 1) for dx in (-1, 0, 1)]
+    clear = np.all([w == shadowed for w in window], axis=0) & np.all(cover, axis=0)
+    return facing, shadowed, clear
+
+
+def _check_sun(scene, sun_object, width=240, height=160, limit=0.0002):
+    to_light = -(sun_object.matrix_world.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
+    result = _exact(scene, width, height)
+    images = result.images
+    facing, expected, clear = _sun_truth(scene, images, to_light)
+    exact_shadowed = images["aux"][..., 0] < 0.5
+    judged = facing & clear
+    assert 0.03 < expected[facing].mean() < 0.97, "the view shows both shadow and light"
+    assert judged.sum() > 0.8 * facing.sum(), "few pixels straddle a shadow edge"
+    wrong = np.mean(exact_shadowed[judged] != expected[judged])
+    assert wrong <= limit, (f"{wrong:.4%} of {judged.sum()} lit-or-shadowed pixels "
+                            f"disagree with the ray cast")
+    return result
+
+
+def test_pillar_row_under_a_grazing_sun(empty_scene):
+    scene = empty_scene
+    add_ground(80, location=(20, 0, 0))
+    for i in range(8):
+        add_box((i * 5.0, 0, 2.0), (0.5, 0.5, 2.0))
+    sun = add_sun((0.35, 0.5, -0.17))          # about 16 degrees above the horizon
+    add_camera(scene, (4, 26, 10), (16, 4, 0), lens=28)
+    _check_sun(scene, sun)
+
+
+def test_camera_inside_a_shadow_volume(empty_scene):
+    """The camera stands in the shadow of a roof: depth-fail counts only behind the
+    surfaces, so being inside a volume changes nothing."""
+    scene = empty_scene
+    add_ground(60)
+    add_box((0, 0, 6.0), (4.0, 4.0, 0.3))
+    add_box((5, 6, 1.0), (1.0, 1.0, 1.0))
+    sun = add_sun((0.1, 0.2, -1.0))
+    add_camera(scene, (0.5, -1.5, 1.6), (6, 10, 0), lens=24)
+    result = _check_sun(scene, sun)
+    assert result.passes is not None
+
+
+def test_mirrored_caster(empty_scene):
+    """A cone turned inside out by a negative scale casts the same shadow as a ray says."""
+    scene = empty_scene
+    add_ground(30)
+    bpy.ops.mesh.primitive_cone_add(location=(0, 0, 2.0), rotation=(0.4, 0.3, 0.0))
+    bpy.context.object.scale = (-1.2, 1.0, 1.5)
+    sun = add_sun((0.4, 0.3, -0.8))
+    add_camera(scene, (-1, 8, 6), (1.5, 1, 0.5), lens=40)
+    _check_sun(scene, sun)
+
+
+def test_open_plane_caster(empty_scene):
+    """An open, tilted plane (no closed volume to take silhouettes of) over a box."""
+    scene = empty_scene
+    add_ground(30)
+    bpy.ops.mesh.primitive_plane_add(size=3.0, location=(0, 0, 3.0), rotation=(0.5, 0.2, 0))
+    add_box((2.5, 1.5, 0.5), (0.5, 0.5, 0.5))
+    sun = add_sun((0.3, 0.4, -0.85))
+    add_camera(scene, (5, -8, 8), (0, 0, 1), lens=30)
+    _check_sun(scene, sun)
+
+
+def test_volumes_are_kept_while_only_the_camera_moves(empty_scene):
+    """In the viewport a camera move builds no volume; turning the sun builds them again,
+    and the picture follows it."""
+    from csm_engine.blender import engine, mesh_cache
+    from csm_engine.render import pipeline
+    scene = empty_scene
+    add_ground(20)
+    add_box((0, 0, 1.0), (1.0, 1.0, 1.0))
+    sun = add_sun((0.3, 0.2, -0.9))
+    add_camera(scene, (6, -6, 5), (0, 0, 0))
+    scene.csm.shadow_filter = 'EXACT'
+    render_result(scene, 32, 32)             # a GPU context exists from here on
+    cache, renderer = mesh_cache.MeshCache(), pipeline.Pipeline()
+    handler = lambda _scene, depsgraph: engine.apply_depsgraph_updates(  # noqa: E731
+        cache, depsgraph.updates)
+    bpy.app.handlers.depsgraph_update_post.append(handler)
+    try:
+        first = viewport_frame(scene, renderer, cache, 64, 48)
+        volumes = renderer.shadow_volumes
+        built = volumes.builds
+        assert built == 2 and volumes.triangle_count > 0
+        scene.camera.location.x += 1.0
+        bpy.context.view_layer.update()
+        moved = viewport_frame(scene, renderer, cache, 64, 48)
+        assert volumes.builds == built, "a camera move rebuilt volumes"
+        assert np.abs(moved - first).max() > 0.01, "the view moved"
+        sun.rotation_euler.x += 0.2
+        bpy.context.view_layer.update()
+        viewport_frame(scene, renderer, cache, 64, 48)
+        assert volumes.builds == built + 2, "a sun turn rebuilds every volume"
+    finally:
+        bpy.app.handlers.depsgraph_update_post.remove(handler)
