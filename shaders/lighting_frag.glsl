@@ -173,6 +173,12 @@ void main()
   if (depth <= 0.0) {
     /* Background: the World colour; alpha 0 with Film > Transparent. */
     out_color = vec4(frame.background_color, frame.background_alpha);
+#ifdef WITH_DEBUG_VIEWS
+    if (frame.debug_view == DEBUG_SHADOW_ERROR) {
+      /* Black, so the view's surface pixels can be counted (render/shadow_volumes.py). */
+      out_color = vec4(0.0, 0.0, 0.0, 1.0);
+    }
+#endif
     out_aux = vec4(1.0, -1.0, 1e10, 0.0);
     return;
   }

@@ -39,7 +39,7 @@ from .readback import read_images
 from .resources import RenderTargetError, Targets  # noqa: F401
 from .result import PassCounts, RenderResult
 from .shadow_atlas import allocate_atlas, draw_shadow_atlas
-from .shadow_volumes import ShadowVolumes, draw_shadow_volumes, needs_volumes
+from .shadow_volumes import ShadowVolumes, draw_shadow_volumes, needs_volumes, shadow_error
 from .visible_depth import VisibleDepth
 
 
@@ -63,6 +63,7 @@ class Pipeline:
         self.last_frame = PassCounts()  # what the last ``draw`` drew and kept
         self.last_plan = None           # the shadow plan the last ``draw`` used
         self.gbuffer_fb = None          # kept after draw() for the final render's read-back
+        self.shadow_error = None        # the last Shadow error view's ShadowError
 
     @property
     def shadow_volumes(self):
@@ -200,6 +201,10 @@ class Pipeline:
                       target_fb, width, height, depth_tested, overlays, volume_count)
         if target_fb is not None:
             t = self._sync(target_fb, "lighting", t)
+        self.shadow_error = None
+        if volume_count is not None and snap.settings.debug_view == "SHADOW_ERROR" and \
+                targets.records:
+            self.shadow_error = shadow_error(target_fb, width, height)
 
         self.gbuffer_fb = gbuffer.framebuffer
         self.last_frame = _counts(targets, tiles, gbuffer_kept, ambient_occlusion)
@@ -244,7 +249,8 @@ class Pipeline:
                              with_positions)
         self.timings["readback"] = time.perf_counter() - t
         return RenderResult(images=images, plan=plan, timings=dict(self.timings),
-                            passes=passes, warnings=list(self.warnings))
+                            passes=passes, warnings=list(self.warnings),
+                            shadow_error=self.shadow_error)
 
 
 def _counts(targets, tiles, gbuffer_kept, ambient_occlusion):

@@ -5,7 +5,9 @@ topology by upload, each instance's volume by its mesh, matrix and the sun's dir
 the one vertex buffer of them all, rebuilt only when one of those changes; a camera move
 builds nothing) and ``draw_shadow_volumes``, which counts the volumes into an R32F target
 against the G-buffer's view depth (depth-fail without a stencil buffer:
-``shadow_volume_frag.glsl``). The geometry comes from ``core/shadow_volumes.py``.
+``shadow_volume_frag.glsl``). The geometry comes from ``core/shadow_volumes.py``. Also
+owns ``ShadowError`` and ``shadow_error``: the Shadow error view's share of surface pixels
+whose Filter shadow is false or missed, counted from the view's own pixels.
 
 What casts: instances that cast shadows, and of their triangles those whose material
 casts an opaque shadow; alpha-clipped and hashed shadows are left out (the setting's
@@ -13,6 +15,7 @@ description says so).
 """
 
 import math
+from typing import NamedTuple
 
 import numpy as np
 
@@ -132,3 +135,38 @@ def draw_shadow_volumes(targets, volumes, snap, cache, bounds, frame_ubo, gbuffe
             targets.call(batch.draw, program)
             gpu.state.blend_set('NONE')
     return count, framebuffer
+
+
+class ShadowError(NamedTuple):
+    """What the Shadow error view showed: the shares (0..1) of its surface pixels where the
+    Filter shadows what the sun reaches (``false_shadow``) or lights what it does not
+    (``missed_shadow``), out of ``surface_pixels``."""
+    false_shadow: float
+    missed_shadow: float
+    surface_pixels: int
+
+    @property
+    def label(self):
+        return (f"false shadow {100 * self.false_shadow:.2f} %, missed shadow "
+                f"{100 * self.missed_shadow:.2f} % of {self.surface_pixels} pixels")
+
+
+def shadow_error(framebuffer, width, height):
+    """Count the Shadow error view's colours (``debug_views.glsl``'s
+    ``shadow_error_color``: pure red, pure cyan, grey from 0.2, black background) in
+    ``framebuffer`` (None: the bound one). Colours mixed by FXAA at an edge are counted by
+    the nearer colour."""
+    import gpu
+    if framebuffer is None:
+        framebuffer = gpu.state.active_framebuffer_get()
+    buffer = gpu.types.Buffer('FLOAT', width * height * 4)
+    with framebuffer.bind():
+        framebuffer.read_color(0, 0, width, height, 4, 0, 'FLOAT', data=buffer)
+    rgb = np.frombuffer(buffer, np.float32).reshape(-1, 4)[:, :3]
+    red, green, blue = rgb[:, 0], rgb[:, 1], rgb[:, 2]
+    surface = rgb.max(axis=1) > 0.1
+    false = (red > 0.6) & (green < 0.3) & (blue < 0.3)
+    missed = (red < 0.3) & (green > 0.6) & (blue > 0.6)
+    count = int(surface.sum())
+    return ShadowError(float(false.sum()) / max(count, 1), float(missed.sum()) / max(count, 1),
+                       count)

@@ -136,3 +136,37 @@ def test_volumes_are_kept_while_only_the_camera_moves(empty_scene):
         assert volumes.builds == built + 2, "a sun turn rebuilds every volume"
     finally:
         bpy.app.handlers.depsgraph_update_post.remove(handler)
+
+
+def test_shadow_error_view_lights_up_where_a_ray_cast_says_the_map_is_wrong(empty_scene):
+    """Cascades of 64 texels under Filter Hard: the Shadow error view is red or cyan where
+    the map's shadow differs from the ray cast, grey where it agrees, and its counts are
+    those of its pixels."""
+    scene = empty_scene
+    add_ground(40, location=(8, 0, 0))
+    for i in range(4):
+        add_box((i * 4.0, 0, 1.5), (0.4, 0.4, 1.5))
+    sun = add_sun((0.5, 0.45, -0.6))
+    add_camera(scene, (2, 16, 9), (9, 2, 0), lens=30)
+    scene.csm.cascade_count = 1
+    scene.csm.resolution = 64
+    scene.csm.shadow_filter = 'HARD'
+    scene.csm.debug_view = 'SHADOW_ERROR'
+    scene.csm.fxaa = False
+    result = render_result(scene, 240, 160)
+    images = result.images
+    to_light = -(sun.matrix_world.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
+    facing, expected, _clear = _sun_truth(scene, images, to_light)
+    map_wrong = ((images["aux"][..., 0] < 0.5) != expected)[facing]
+    color = images["combined"][..., :3]
+    lit_up = (np.abs(color[..., 0] - color[..., 1]) > 0.5)[facing]
+    assert map_wrong.sum() > 100, "a 64-texel map gets many pixels wrong"
+    # Only a shadow edge within rounding of a pixel's centre may tell the ray cast and the
+    # volumes apart.
+    assert np.sum(lit_up != map_wrong) <= 0.0005 * facing.sum(), \
+        (np.sum(lit_up & ~map_wrong), np.sum(map_wrong & ~lit_up), facing.sum())
+    error = result.shadow_error
+    assert error is not None and error.surface_pixels == int((color.max(axis=2) > 0.1).sum())
+    shown = np.abs(color[..., 0] - color[..., 1]) > 0.5
+    assert abs(error.false_shadow + error.missed_shadow -
+               shown.sum() / error.surface_pixels) < 1e-6
