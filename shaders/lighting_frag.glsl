@@ -115,6 +115,13 @@ void add_point_light_range(Surface s, int first, int end, const bool shadowed,
         int tile = frame.point_shadow_tiles + 6 * i + cube_face(s.position - light.position);
         vis = shadow_tile_visibility(frame.shadow_tiles[tile], s.position, s.shadow_normal,
                                      dot(s.shadow_normal, l), light.source_radius);
+#if SHADOW_FILTER == FILTER_EXACT
+        /* The first shadowed lights have counted volumes (shadow_volume_lookup.glsl). */
+        int c = point_volume_channel(i);
+        if (c > 0) {
+          vis = volume_visibility_in(ivec2(gl_FragCoord.xy), c);
+        }
+#endif
       }
 #endif
       color += light.color * attenuation * vis * surface_response(s, l);
@@ -137,6 +144,7 @@ void add_point_lights(Surface s, inout vec3 color)
 void add_spot_lights(Surface s, inout vec3 color)
 {
   int spot_count = frame.spot_light_count;
+  int shadowed_rank = 0;   /* shadowed spots before this one */
   for (int i = 0; i < MAX_SPOT_LIGHTS; i++) {
     if (i >= spot_count) {
       break;
@@ -150,9 +158,16 @@ void add_spot_lights(Surface s, inout vec3 color)
         vis = shadow_tile_visibility(frame.shadow_tiles[spot.shadow_tile], s.position,
                                      s.shadow_normal, dot(s.shadow_normal, l),
                                      spot.source_radius);
+#if SHADOW_FILTER == FILTER_EXACT
+        int c = spot_volume_channel(shadowed_rank);
+        if (c > 0) {
+          vis = volume_visibility_in(ivec2(gl_FragCoord.xy), c);
+        }
+#endif
       }
       color += spot.color * attenuation * vis * surface_response(s, l);
     }
+    shadowed_rank += spot.shadow_tile >= 0 ? 1 : 0;
   }
 }
 

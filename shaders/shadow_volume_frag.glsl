@@ -15,5 +15,7 @@ void main()
   if (surface <= 0.0 || volume_depth < surface * (1.0 - VOLUME_DEPTH_TOLERANCE)) {
     discard;
   }
-  out_count = vec4(gl_FrontFacing ? -1.0 : 1.0, 0.0, 0.0, 1.0);
+  /* One light per channel (render/shadow_volumes.py); the blend (ADDITIVE_PREMULT) adds
+   * all four channels as they are. */
+  out_count = (gl_FrontFacing ? -1.0 : 1.0) * channel;
 }

@@ -269,15 +269,16 @@ _SETTINGS = (
                                        "spot Radius): sharp at contact, wider with distance, "
                                        "as in Cycles (PCSS: blocker search, then a variable "
                                        "filter)"),
-            EXACT=("Exact (shadow volumes)", "The sun's exact hard shadow, counted per pixel "
-                                             "through shadow volumes, as a ray cast would "
-                                             "see it; no biases, no cascades. Casters with an "
-                                             "alpha-clipped or hashed shadow cast none; spot "
-                                             "and point lights keep their maps' hard tap")),
+            EXACT=("Exact (shadow volumes)", "Exact hard shadows, counted per pixel through "
+                                             "shadow volumes as a ray cast would see them: "
+                                             "no biases, no resolution. The sun and the first "
+                                             "three shadowed point or spot lights; further "
+                                             "lights keep their maps' hard tap. Casters with "
+                                             "an alpha-clipped or hashed shadow cast none")),
         description="Shadow filter: how shadow edges are filtered: one hard tap, the fixed "
                     "PCF kernel below, soft shadows whose penumbra widens with the "
                     "distance to the caster as the sun's Angle and a spot light's Radius say "
-                    "(PCSS), or the sun's exact hard shadow by shadow volumes"),
+                    "(PCSS), or exact hard shadows by shadow volumes"),
     Setting(
         "pcf_radius", "Radius", INT, 1, FILTERING, min=0, max=8,
         active_when=_when(shadow_filter="PCF"),

@@ -39,7 +39,7 @@ from .readback import read_images
 from .resources import RenderTargetError, Targets  # noqa: F401
 from .result import PassCounts, RenderResult
 from .shadow_atlas import allocate_atlas, draw_shadow_atlas
-from .shadow_volumes import ShadowVolumes, draw_shadow_volumes, needs_volumes, shadow_error
+from .shadow_volumes import ShadowVolumes, draw_shadow_volumes, shadow_error, volume_lights
 from .visible_depth import VisibleDepth
 
 
@@ -191,10 +191,11 @@ class Pipeline:
             t = self._sync(ambient_occlusion.framebuffer, "ao", t)
 
         volume_count = None
-        if needs_volumes(snap):
+        lights = volume_lights(snap, plan)
+        if lights:
             volume_count, volume_fb = draw_shadow_volumes(
-                targets, self.shadow_volumes, snap, cache, bounds, frame_ubo, gbuffer,
-                width, height)
+                targets, self.shadow_volumes, snap, cache, bounds, lights, frame_ubo,
+                gbuffer, width, height)
             t = self._sync(volume_fb, "shadow_volumes", t)
 
         draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlusion,

@@ -167,7 +167,8 @@ PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),
 # The Exact filter's shadow volumes counted per pixel (render/shadow_volumes.py).
 PROGRAMS["shadow_volume"] = dict(
     vertex="shadow_volume_vert.glsl", fragment="shadow_volume_frag.glsl",
-    inputs=(("pos", "VEC3"),), interface=(("volume_depth", "FLOAT", "smooth"),), push=(),
+    inputs=(("pos", "VEC3"),), interface=(("volume_depth", "FLOAT", "smooth"),),
+    push=(("VEC4", "channel"),),
     samplers=(("FLOAT_2D", "gbuffer_depth"),), frame=True,
     outputs=(("VEC4", "out_count"),))
 

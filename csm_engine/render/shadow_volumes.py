@@ -1,10 +1,12 @@
-"""The shadow-volume pass: the Exact filter's per-pixel count of the sun's shadow volumes.
+"""The shadow-volume pass: the Exact filter's per-pixel count of the lights' shadow volumes.
 
-Owns ``ShadowVolumes`` (one view's volume geometry, kept between frames: each mesh's
-topology by upload, each instance's volume by its mesh, matrix and the sun's direction, and
-the one vertex buffer of them all, rebuilt only when one of those changes; a camera move
-builds nothing) and ``draw_shadow_volumes``, which counts the volumes into an R32F target
-against the G-buffer's view depth (depth-fail without a stencil buffer:
+Owns ``volume_lights`` (which lights a frame counts: the sun, and with Filter Exact the
+first three shadowed point and spot lights), ``ShadowVolumes`` (one view's volume geometry,
+kept between frames: each mesh's topology by upload, each instance's volume by its mesh,
+matrix and the light's direction or position, and one vertex buffer per light, rebuilt only
+when one of those changes; a camera move builds nothing) and ``draw_shadow_volumes``, which
+counts the volumes into an RGBA32F target, a light per channel, against the G-buffer's view
+depth (depth-fail without a stencil buffer:
 ``shadow_volume_frag.glsl``). The geometry comes from ``core/shadow_volumes.py``. Also
 owns ``ShadowError`` and ``shadow_error``: the Shadow error view's share of surface pixels
 whose Filter shadow is false or missed, counted from the view's own pixels.
@@ -23,12 +25,37 @@ from ..core import shadow_volumes as geometry
 from . import shaders
 
 
-def needs_volumes(snap):
-    """Whether this frame counts the sun's shadow volumes: Filter Exact, or the Shadow
-    error view (which compares the Filter with them), with a sun that casts shadows."""
+# Channels of the count target: the sun's count in the first, then the first shadowed
+# local lights' (point lights with shadows first, then shadowed spots in order), as
+# shadow_volume_lookup.glsl reads them.
+LOCAL_LIGHT_CHANNELS = 3
+
+
+class VolumeLight(NamedTuple):
+    """One light whose volumes a frame counts: "SUN" with the unit vector towards it, or
+    "POINT" (point and spot lights) with its position; ``channel`` of the count target."""
+    kind: str
+    vector: tuple
+    channel: int
+
+
+def volume_lights(snap, plan):
+    """The lights this frame counts volumes for (``VolumeLight``): with Filter Exact the
+    shadow-casting sun and the first ``LOCAL_LIGHT_CHANNELS`` shadowed point and spot
+    lights of ``plan`` (the ones that have shadow maps); in the Shadow error view the sun
+    too. None are counted in any other frame."""
     settings = snap.settings
-    wanted = settings.shadow_filter == "EXACT" or settings.debug_view == "SHADOW_ERROR"
-    return wanted and snap.sun is not None and bool(snap.sun.casts_shadow)
+    exact = settings.shadow_filter == "EXACT"
+    lights = []
+    if (exact or settings.debug_view == "SHADOW_ERROR") and snap.sun is not None and \
+            snap.sun.casts_shadow:
+        lights.append(VolumeLight("SUN", tuple(map(float, snap.sun.to_light)), 0))
+    if exact and plan is not None:
+        local = [snap.points[i].position for i in range(plan.point_shadow_count)]
+        local += [snap.spots[i].position for i in sorted(plan.spot_tiles)]
+        for channel, position in enumerate(local[:LOCAL_LIGHT_CHANNELS], start=1):
+            lights.append(VolumeLight("POINT", tuple(map(float, position)), channel))
+    return lights
 
 
 def _extrusion(bounds):
@@ -42,18 +69,32 @@ def _extrusion(bounds):
     return 2.0 ** math.ceil(math.log2(max(diagonal * 1.25, 1e-3)))
 
 
+def _reach(bounds, position):
+    """The farthest a receiver can be from a light at ``position``: the scene bounds'
+    farthest corner, rounded up like ``_extrusion``."""
+    if bounds is None:
+        return 1.0
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                        for z in (lo[2], hi[2])])
+    farthest = float(np.linalg.norm(corners - np.asarray(position), axis=1).max())
+    return 2.0 ** math.ceil(math.log2(max(farthest * 1.05, 1e-3)))
+
+
 class ShadowVolumes:
     """One view's volume geometry, kept from frame to frame (see the module docstring).
     ``builds``: instance volumes built so far; ``triangle_count``: triangles in the last
-    frame's volumes."""
+    frame's volumes, all lights together."""
 
     def __init__(self):
         self._topologies = {}     # mesh serial -> MeshTopology of its opaque casters
-        self._volumes = {}        # (serial, matrix bytes, sun bytes, extrusion) -> soup
-        self._batch = None
-        self._batch_keys = None
+        self._volumes = {}        # (serial, matrix bytes, light, extent) -> soup
+        self._batches = {}        # channel -> (keys, batch, triangles)
         self.builds = 0
-        self.triangle_count = 0
+
+    @property
+    def triangle_count(self):
+        return sum(triangles for _keys, _batch, triangles in self._batches.values())
 
     def _topology(self, mesh):
         topology = self._topologies.get(mesh.serial)
@@ -68,72 +109,94 @@ class ShadowVolumes:
             self._topologies[mesh.serial] = topology
         return topology
 
-    def batch(self, snap, cache, bounds):
-        """The vertex batch of every casting instance's volume for this frame's sun (None
-        without any), built only where something changed."""
-        import gpu
-        to_light = np.asarray(snap.sun.to_light, dtype=np.float64)
-        extrusion = _extrusion(bounds)
-        keys, meshes = [], []
+    def batches(self, snap, cache, bounds, lights):
+        """Per light of ``lights`` (``VolumeLight``), the vertex batch of every casting
+        instance's volume (None without any), built only where something changed."""
+        casting = []
         for instance in snap.instances:
             mesh = cache.meshes.get(instance.key)
             if not instance.casts_shadow or mesh is None or mesh.positions is None:
                 continue
             matrix = np.asarray(instance.world_from_object, dtype=np.float64)
-            keys.append((mesh.serial, matrix.tobytes(), to_light.tobytes(), extrusion))
-            meshes.append((mesh, matrix))
-        keys = tuple(keys)
-        if keys == self._batch_keys:
-            return self._batch
-        volumes, soups = {}, []
-        for key, (mesh, matrix) in zip(keys, meshes):
-            soup = volumes.get(key)
-            if soup is None:
-                soup = self._volumes.get(key)
-            if soup is None:
-                soup = geometry.sun_volume(self._topology(mesh), matrix, to_light, extrusion)
-                self.builds += 1
-            volumes[key] = soup
-            soups.append(soup)
+            casting.append((mesh, matrix, matrix.tobytes()))
+        volumes, batches, result = {}, {}, []
+        for light in lights:
+            extent = _extrusion(bounds) if light.kind == "SUN" else \
+                _reach(bounds, light.vector)
+            keys = tuple((mesh.serial, matrix_bytes, light.kind, light.vector, extent)
+                         for mesh, _matrix, matrix_bytes in casting)
+            held = self._batches.get(light.channel)
+            if held is not None and held[0] == keys:
+                batches[light.channel] = held
+                for key in keys:
+                    volumes[key] = self._volumes[key]
+                result.append(held[1])
+                continue
+            soups = []
+            for key, (mesh, matrix, _bytes) in zip(keys, casting):
+                soup = volumes.get(key)
+                if soup is None:
+                    soup = self._volumes.get(key)
+                if soup is None:
+                    topology = self._topology(mesh)
+                    if light.kind == "SUN":
+                        soup = geometry.sun_volume(topology, matrix, light.vector, extent)
+                    else:
+                        soup = geometry.point_volume(topology, matrix, light.vector, extent)
+                    self.builds += 1
+                volumes[key] = soup
+                soups.append(soup)
+            batch, triangles = _upload(soups)
+            batches[light.channel] = (keys, batch, triangles)
+            result.append(batch)
         self._volumes = volumes
-        live = {key[0] for key in keys}
+        self._batches = batches
+        live = {key[0] for key in volumes}
         self._topologies = {s: t for s, t in self._topologies.items() if s in live}
-        vertices = np.concatenate(soups) if soups else np.zeros((0, 3), np.float32)
-        self.triangle_count = len(vertices) // 3
-        self._batch = None
-        if len(vertices):
-            fmt = gpu.types.GPUVertFormat()
-            fmt.attr_add(id="pos", comp_type='F32', len=3, fetch_mode='FLOAT')
-            vbo = gpu.types.GPUVertBuf(fmt, len(vertices))
-            vbo.attr_fill("pos", np.ascontiguousarray(vertices, dtype=np.float32))
-            self._batch = gpu.types.GPUBatch(type='TRIS', buf=vbo)
-        self._batch_keys = keys
-        return self._batch
+        return result
 
 
-def draw_shadow_volumes(targets, volumes, snap, cache, bounds, frame_ubo, gbuffer, width,
-                        height):
-    """Count the sun's shadow volumes (``volumes``: this view's ``ShadowVolumes``) behind
-    each pixel of ``gbuffer`` into an R32F texture, which it returns: above zero in
-    shadow."""
+def _upload(soups):
+    """One vertex batch of triangle soups (None when empty), and its triangle count."""
     import gpu
-    count = targets.texture("volume_count", (width, height), 'R32F')
+    vertices = np.concatenate(soups) if soups else np.zeros((0, 3), np.float32)
+    if not len(vertices):
+        return None, 0
+    fmt = gpu.types.GPUVertFormat()
+    fmt.attr_add(id="pos", comp_type='F32', len=3, fetch_mode='FLOAT')
+    vbo = gpu.types.GPUVertBuf(fmt, len(vertices))
+    vbo.attr_fill("pos", np.ascontiguousarray(vertices, dtype=np.float32))
+    return gpu.types.GPUBatch(type='TRIS', buf=vbo), len(vertices) // 3
+
+
+def draw_shadow_volumes(targets, volumes, snap, cache, bounds, lights, frame_ubo, gbuffer,
+                        width, height):
+    """Count the shadow volumes of ``lights`` (``volume_lights``; ``volumes``: this view's
+    ``ShadowVolumes``) behind each pixel of ``gbuffer`` into an RGBA32F texture, one light
+    per channel, which it returns with its framebuffer: above zero in shadow."""
+    import gpu
+    count = targets.texture("volume_count", (width, height), 'RGBA32F')
     framebuffer = targets.framebuffer("volume_count", colors=(count,))
-    batch = volumes.batch(snap, cache, bounds)
+    batches = volumes.batches(snap, cache, bounds, lights)
     with framebuffer.bind():
         gpu.state.viewport_set(0, 0, width, height)
         targets.call(framebuffer.clear, color=(0.0, 0.0, 0.0, 0.0))
-        if batch is not None:
-            program = shaders.LIBRARY.get("shadow_volume")
-            gpu.state.depth_test_set('NONE')
-            gpu.state.depth_mask_set(False)
-            gpu.state.face_culling_set('NONE')
-            gpu.state.blend_set('ADDITIVE_PREMULT')
-            program.bind()
-            program.uniform_block("frame", frame_ubo)
-            program.uniform_sampler("gbuffer_depth", gbuffer.view_depth)
+        program = shaders.LIBRARY.get("shadow_volume")
+        gpu.state.depth_test_set('NONE')
+        gpu.state.depth_mask_set(False)
+        gpu.state.face_culling_set('NONE')
+        gpu.state.blend_set('ADDITIVE_PREMULT')
+        program.bind()
+        program.uniform_block("frame", frame_ubo)
+        program.uniform_sampler("gbuffer_depth", gbuffer.view_depth)
+        for light, batch in zip(lights, batches):
+            if batch is None:
+                continue
+            mask = [0.0, 0.0, 0.0, 0.0]
+            mask[light.channel] = 1.0
+            program.uniform_float("channel", mask)
             targets.call(batch.draw, program)
-            gpu.state.blend_set('NONE')
+        gpu.state.blend_set('NONE')
     return count, framebuffer
 
 
