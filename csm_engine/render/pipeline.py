@@ -64,6 +64,9 @@ class Pipeline:
         self.last_plan = None           # the shadow plan the last ``draw`` used
         self.gbuffer_fb = None          # kept after draw() for the final render's read-back
         self.shadow_error = None        # the last Shadow error view's ShadowError
+        # The last frame's shadow-volume counts (RGBA32F: the sun, then up to three local
+        # lights; above zero in shadow), None when it counted none: for a render pass.
+        self.volume_count = None
 
     @property
     def shadow_volumes(self):
@@ -208,6 +211,7 @@ class Pipeline:
             self.shadow_error = shadow_error(target_fb, width, height)
 
         self.gbuffer_fb = gbuffer.framebuffer
+        self.volume_count = volume_count
         self.last_frame = _counts(targets, tiles, gbuffer_kept, ambient_occlusion)
         self.last_plan = plan
         self.timings["total"] = time.perf_counter() - start

@@ -246,3 +246,16 @@ def test_spot_and_point_lights_against_a_ray_cast_to_the_light(empty_scene, kind
     assert judged.sum() > 0.98 * lighted.sum()
     wrong = np.mean(exact_shadowed[judged] != expected[judged])
     assert wrong <= 0.0002, f"{wrong:.4%} of {judged.sum()} pixels disagree with the ray cast"
+
+
+def test_the_legend_names_the_shares_of_false_and_missed_shadow():
+    from types import SimpleNamespace
+
+    from csm_engine.render import overlays
+    from csm_engine.render.shadow_volumes import ShadowError
+    snap = SimpleNamespace(settings=SimpleNamespace(debug_view="SHADOW_ERROR"))
+    rows = overlays.legend_rows(snap, None, ShadowError(0.0123, 0.0456, 1000))
+    assert [row.label for row in rows] == ["false shadow 1.23 %", "missed shadow 4.56 %"]
+    assert [row.color for row in rows] == list(overlays.SHADOW_ERROR_COLORS)
+    snap.settings.debug_view = "NONE"
+    assert overlays.legend_rows(snap, None, ShadowError(0.1, 0.1, 10)) == []
