@@ -198,7 +198,7 @@ class Pipeline:
         if lights:
             volume_count, volume_fb = draw_shadow_volumes(
                 targets, self.shadow_volumes, snap, cache, bounds, lights, frame_ubo,
-                gbuffer, width, height)
+                gbuffer, width, height, gbuffer_kept)
             t = self._sync(volume_fb, "shadow_volumes", t)
 
         draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlusion,

@@ -91,10 +91,18 @@ class ShadowVolumes:
         self._volumes = {}        # (serial, matrix bytes, light, extent) -> soup
         self._batches = {}        # channel -> (keys, batch, triangles)
         self.builds = 0
+        # What the count texture holds: (texture, G-buffer depth, ``contents``).
+        self.held_count = None
+        self.counts_kept = 0      # frames whose counts were kept (tests)
 
     @property
     def triangle_count(self):
         return sum(triangles for _keys, _batch, triangles in self._batches.values())
+
+    def contents(self, lights):
+        """What the volumes of ``lights`` are made of, as a value (per channel the keys of
+        its instances' volumes), after ``batches`` built them."""
+        return tuple((light.channel, self._batches[light.channel][0]) for light in lights)
 
     def _topology(self, mesh):
         topology = self._topologies.get(mesh.serial)
@@ -170,14 +178,21 @@ def _upload(soups):
 
 
 def draw_shadow_volumes(targets, volumes, snap, cache, bounds, lights, frame_ubo, gbuffer,
-                        width, height):
+                        width, height, gbuffer_kept=False):
     """Count the shadow volumes of ``lights`` (``volume_lights``; ``volumes``: this view's
     ``ShadowVolumes``) behind each pixel of ``gbuffer`` into an RGBA32F texture, one light
-    per channel, which it returns with its framebuffer: above zero in shadow."""
+    per channel, which it returns with its framebuffer: above zero in shadow. With the
+    G-buffer kept (``gbuffer_kept``) and the same volumes, the counts the texture holds
+    are kept too (a light or filter setting changed, an unchanged re-render)."""
     import gpu
     count = targets.texture("volume_count", (width, height), 'RGBA32F')
     framebuffer = targets.framebuffer("volume_count", colors=(count,))
     batches = volumes.batches(snap, cache, bounds, lights)
+    held = (count, gbuffer.view_depth, volumes.contents(lights))
+    if gbuffer_kept and targets.records and volumes.held_count == held:
+        volumes.counts_kept += 1
+        return count, framebuffer
+    volumes.held_count = None
     with framebuffer.bind():
         gpu.state.viewport_set(0, 0, width, height)
         targets.call(framebuffer.clear, color=(0.0, 0.0, 0.0, 0.0))
@@ -197,6 +212,8 @@ def draw_shadow_volumes(targets, volumes, snap, cache, bounds, lights, frame_ubo
             program.uniform_float("channel", mask)
             targets.call(batch.draw, program)
         gpu.state.blend_set('NONE')
+    if targets.records:
+        volumes.held_count = held
     return count, framebuffer
 
 

@@ -259,3 +259,21 @@ def test_the_legend_names_the_shares_of_false_and_missed_shadow():
     assert [row.color for row in rows] == list(overlays.SHADOW_ERROR_COLORS)
     snap.settings.debug_view = "NONE"
     assert overlays.legend_rows(snap, None, ShadowError(0.1, 0.1, 10)) == []
+
+
+def test_counts_are_kept_with_the_gbuffer_and_redrawn_when_the_sun_turns(empty_scene):
+    """An unchanged re-render keeps the counted volumes; turning the sun (the G-buffer
+    is still kept) counts them again, and the shadow moves."""
+    scene = empty_scene
+    add_ground(20)
+    add_box((0, 0, 1.0), (1.0, 1.0, 1.0))
+    sun = add_sun((0.3, 0.2, -0.9))
+    add_camera(scene, (6, -6, 5), (0, 0, 0))
+    first = _exact(scene, 64, 48)
+    again = _exact(scene, 64, 48)
+    assert again.passes.gbuffers_kept == 1
+    np.testing.assert_array_equal(first.images["aux"][..., 0], again.images["aux"][..., 0])
+    sun.rotation_euler.z += 0.8
+    turned = _exact(scene, 64, 48)
+    assert turned.passes.gbuffers_kept == 1
+    assert np.mean(turned.images["aux"][..., 0] != first.images["aux"][..., 0]) > 0.01
