@@ -47,6 +47,7 @@ def open_bench_scene(name, width, height):
 def time_filter(scene, shadow_filter, repeats):
     """(first render's timings, median timings of ``repeats`` redrawn renders)."""
     from csm_engine.blender import engine
+    scene.render.engine = "CSM"
     scene.csm.shadow_filter = shadow_filter
     scene.csm.fxaa = False
     engine.forget_final_render_passes()
