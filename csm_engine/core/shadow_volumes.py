@@ -93,15 +93,28 @@ def _casting(topology, world, mirrored, facing_light):
     return casting, facing < 0.0
 
 
+class Volume(NamedTuple):
+    """A shadow volume as indexed triangles: ``vertices`` (N, 3) float32 world positions
+    (each welded corner, then each corner pushed away from the light) and ``triangles``
+    (M, 3) int32 indices into them, wound outward. Indexed, so each corner is transformed
+    once however many caps and sides share it."""
+    vertices: np.ndarray
+    triangles: np.ndarray
+
+    def soup(self):
+        """The triangles as (3 M, 3) float32 corners, three rows per triangle."""
+        return self.vertices[self.triangles].reshape(-1, 3)
+
+
 def _prisms(topology, world, casting, turned, far):
-    """Triangle soup (N, 3) float32 of the casting triangles' prisms with shared sides
-    cancelled; ``far``: (V, 3) each welded corner pushed away from the light."""
+    """The casting triangles' prisms with shared sides cancelled, as a ``Volume``;
+    ``far``: (V, 3) each welded corner pushed away from the light."""
+    count = len(world)
     tris = topology.triangles[casting]
     turned = turned[casting]
     # Wound to face the light: the near cap's outward side is towards it.
     oriented = np.where(turned[:, None], tris[:, [0, 2, 1]], tris)
-    near_caps = world[oriented]
-    far_caps = far[oriented[:, [0, 2, 1]]]
+    far_caps = oriented[:, [0, 2, 1]] + count
     # Net winding of each edge over the casting triangles: +1 per run first->second.
     signs = topology.edge_signs[casting] * np.where(turned, -1, 1)[:, None]
     net = np.bincount(topology.triangle_edges[casting].reshape(-1),
@@ -115,15 +128,16 @@ def _prisms(topology, world, casting, turned, far):
     p, q = runs[:, 0], runs[:, 1]
     # For a near-cap edge p->q (counter-clockwise seen from the light), the outward side
     # quad is q, p, p', q'.
-    sides = np.stack([world[q], world[p], far[p], world[q], far[p], far[q]], axis=1)
-    soup = np.concatenate([near_caps.reshape(-1, 3), far_caps.reshape(-1, 3),
-                           sides.reshape(-1, 3)])
-    return np.ascontiguousarray(soup, dtype=np.float32)
+    sides = np.stack([np.stack([q, p, p + count], axis=1),
+                      np.stack([q, p + count, q + count], axis=1)], axis=1).reshape(-1, 3)
+    vertices = np.concatenate([world, far]).astype(np.float32)
+    triangles = np.concatenate([oriented, far_caps, sides]).astype(np.int32)
+    return Volume(vertices, np.ascontiguousarray(triangles))
 
 
 def sun_volume(topology, world_from_object, to_light, extrusion):
-    """The shadow volume of one mesh instance under the sun: triangles (N, 3) float32 in
-    world space, 3 rows per triangle. ``to_light``: unit vector towards the sun;
+    """The shadow volume of one mesh instance under the sun (a ``Volume`` in world space).
+    ``to_light``: unit vector towards the sun;
     ``extrusion``: how far (scene units) the far caps lie behind the casters: at least the
     scene bounds' diagonal, so every receiver a caster can shade is inside."""
     to_light = np.asarray(to_light, dtype=np.float64)
@@ -142,7 +156,7 @@ _MIN_FAR_CAP_SHARE = 1e-3
 
 def point_volume(topology, world_from_object, light_position, reach):
     """The shadow volume of one mesh instance under a point or spot light at
-    ``light_position``: triangles (N, 3) float32 in world space. ``reach``: the farthest
+    ``light_position`` (a ``Volume`` in world space). ``reach``: the farthest
     distance from the light (scene units) a receiver can be (the scene bounds' farthest
     corner). Corners are pushed along the rays from the light to a common distance, far
     enough that every far cap's plane is beyond ``reach`` (a far cap is a chord of that

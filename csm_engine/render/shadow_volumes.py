@@ -88,7 +88,7 @@ class ShadowVolumes:
 
     def __init__(self):
         self._topologies = {}     # mesh serial -> MeshTopology of its opaque casters
-        self._volumes = {}        # (serial, matrix bytes, light, extent) -> soup
+        self._volumes = {}        # (serial, matrix bytes, light, extent) -> Volume
         self._batches = {}        # channel -> (keys, batch, triangles)
         self.builds = 0
         # What the count texture holds: (texture, G-buffer depth, ``contents``).
@@ -140,21 +140,21 @@ class ShadowVolumes:
                     volumes[key] = self._volumes[key]
                 result.append(held[1])
                 continue
-            soups = []
+            parts = []
             for key, (mesh, matrix, _bytes) in zip(keys, casting):
-                soup = volumes.get(key)
-                if soup is None:
-                    soup = self._volumes.get(key)
-                if soup is None:
+                volume = volumes.get(key)
+                if volume is None:
+                    volume = self._volumes.get(key)
+                if volume is None:
                     topology = self._topology(mesh)
                     if light.kind == "SUN":
-                        soup = geometry.sun_volume(topology, matrix, light.vector, extent)
+                        volume = geometry.sun_volume(topology, matrix, light.vector, extent)
                     else:
-                        soup = geometry.point_volume(topology, matrix, light.vector, extent)
+                        volume = geometry.point_volume(topology, matrix, light.vector, extent)
                     self.builds += 1
-                volumes[key] = soup
-                soups.append(soup)
-            batch, triangles = _upload(soups)
+                volumes[key] = volume
+                parts.append(volume)
+            batch, triangles = _upload(parts)
             batches[light.channel] = (keys, batch, triangles)
             result.append(batch)
         self._volumes = volumes
@@ -164,17 +164,23 @@ class ShadowVolumes:
         return result
 
 
-def _upload(soups):
-    """One vertex batch of triangle soups (None when empty), and its triangle count."""
+def _upload(volumes):
+    """One indexed batch of ``core.shadow_volumes.Volume`` s (None when they have no
+    triangle), and its triangle count."""
     import gpu
-    vertices = np.concatenate(soups) if soups else np.zeros((0, 3), np.float32)
-    if not len(vertices):
+    triangles = sum(len(volume.triangles) for volume in volumes)
+    if not triangles:
         return None, 0
+    offsets = np.cumsum([0] + [len(volume.vertices) for volume in volumes[:-1]])
+    vertices = np.concatenate([volume.vertices for volume in volumes])
+    indices = np.concatenate([volume.triangles + np.int32(offset)
+                              for volume, offset in zip(volumes, offsets)])
     fmt = gpu.types.GPUVertFormat()
     fmt.attr_add(id="pos", comp_type='F32', len=3, fetch_mode='FLOAT')
     vbo = gpu.types.GPUVertBuf(fmt, len(vertices))
     vbo.attr_fill("pos", np.ascontiguousarray(vertices, dtype=np.float32))
-    return gpu.types.GPUBatch(type='TRIS', buf=vbo), len(vertices) // 3
+    ibo = gpu.types.GPUIndexBuf(type='TRIS', seq=np.ascontiguousarray(indices, np.int32))
+    return gpu.types.GPUBatch(type='TRIS', buf=vbo, elem=ibo), triangles
 
 
 def draw_shadow_volumes(targets, volumes, snap, cache, bounds, lights, frame_ubo, gbuffer,

@@ -101,12 +101,12 @@ def test_a_plane_is_open_and_a_repeated_corner_is_dropped():
 def test_box_under_the_sun_extrudes_only_its_silhouette():
     positions, triangles = _box()
     topo = sv.mesh_topology(positions, triangles)
-    soup = sv.sun_volume(topo, np.eye(4), np.array([0.0, 0.0, 1.0]), 10.0)
+    soup = sv.sun_volume(topo, np.eye(4), np.array([0.0, 0.0, 1.0]), 10.0).soup()
     # Bottom face: 2 near caps + 2 far caps; 4 silhouette edges: 8 side triangles.
     assert len(soup) == 3 * (2 + 2 + 8)
     assert _soup_is_closed(soup)
     # A sun from a corner: 3 faces away, a 6-edge silhouette.
-    soup = sv.sun_volume(topo, np.eye(4), np.array([1.0, 1.0, 1.0]) / np.sqrt(3), 10.0)
+    soup = sv.sun_volume(topo, np.eye(4), np.array([1.0, 1.0, 1.0]) / np.sqrt(3), 10.0).soup()
     assert len(soup) == 3 * (6 + 6 + 12)
     assert _soup_is_closed(soup)
 
@@ -148,7 +148,7 @@ def test_sun_volume_counts_what_a_ray_to_the_sun_hits(matrix, mesh):
     rng = np.random.default_rng(3)
     to_light = np.array([0.3, -0.4, 0.85])
     to_light /= np.linalg.norm(to_light)
-    soup = sv.sun_volume(topo, matrix, to_light, 20.0)
+    soup = sv.sun_volume(topo, matrix, to_light, 20.0).soup()
     assert _soup_is_closed(soup)
     points = rng.uniform(-4.0, 4.0, size=(300, 3))
     _check_counts(positions, triangles, matrix, soup, points, to_light=to_light)
@@ -163,7 +163,7 @@ def test_point_volume_counts_what_a_ray_to_the_light_hits(matrix, mesh):
     light = np.array([0.4, 0.2, 3.5])
     points = rng.uniform(-5.0, 5.0, size=(300, 3))
     reach = np.linalg.norm(points - light, axis=1).max()
-    soup = sv.point_volume(topo, matrix, light, reach)
+    soup = sv.point_volume(topo, matrix, light, reach).soup()
     assert _soup_is_closed(soup)
     _check_counts(positions, triangles, matrix, soup, points, light=light)
 
@@ -175,7 +175,7 @@ def test_a_plane_wide_under_a_near_light_keeps_its_far_caps_beyond_reach():
     topo = sv.mesh_topology(positions, triangles)
     light = np.array([0.0, 0.0, 0.5])
     points = np.array([[x, 0.0, z] for x in (-15.0, 0.0, 3.0, 15.0) for z in (-0.5, -3.0)])
-    soup = sv.point_volume(topo, np.eye(4), light, 25.0)
+    soup = sv.point_volume(topo, np.eye(4), light, 25.0).soup()
     np.testing.assert_array_less(0.5, _winding_number(soup, points))
 
 
@@ -186,7 +186,7 @@ def test_two_boxes_overlapping_count_two():
     triangles = np.vstack([t1, t2 + len(p1)])
     topo = sv.mesh_topology(positions, triangles)
     assert topo.closed
-    soup = sv.sun_volume(topo, np.eye(4), np.array([0.0, 0.0, 1.0]), 10.0)
+    soup = sv.sun_volume(topo, np.eye(4), np.array([0.0, 0.0, 1.0]), 10.0).soup()
     np.testing.assert_allclose(_winding_number(soup, np.array([[0.0, 0.0, -2.0]])), [2.0],
                                atol=1e-6)
 
@@ -199,7 +199,7 @@ def test_a_non_manifold_edge_is_extruded_with_its_multiplicity():
     topo = sv.mesh_topology(positions, triangles)
     assert not topo.closed
     to_light = np.array([0.0, 0.0, 1.0])
-    soup = sv.sun_volume(topo, np.eye(4), to_light, 10.0)
+    soup = sv.sun_volume(topo, np.eye(4), to_light, 10.0).soup()
     assert _soup_is_closed(soup)
     points = np.random.default_rng(5).uniform(-1.5, 1.5, size=(200, 3))
     _check_counts(positions, triangles, np.eye(4), soup, points, to_light=to_light)
@@ -207,4 +207,4 @@ def test_a_non_manifold_edge_is_extruded_with_its_multiplicity():
 
 def test_empty_mesh_gives_no_volume():
     topo = sv.mesh_topology(np.zeros((0, 3)), np.zeros((0, 3), dtype=int))
-    assert sv.sun_volume(topo, np.eye(4), np.array([0, 0, 1.0]), 1.0).shape == (0, 3)
+    assert sv.sun_volume(topo, np.eye(4), np.array([0, 0, 1.0]), 1.0).soup().shape == (0, 3)
