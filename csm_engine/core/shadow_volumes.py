@@ -135,16 +135,41 @@ def _prisms(topology, world, casting, turned, far):
     return Volume(vertices, np.ascontiguousarray(triangles))
 
 
-def sun_volume(topology, world_from_object, to_light, extrusion):
+def _sun_far_plane(world, away, lo, hi):
+    """How far along ``away`` (unit, away from the sun) a plane across it must lie so that
+    every ray from the box around ``world`` has left the scene box [``lo``, ``hi``]
+    before reaching it: for each face a ray can leave through, its exit distance is an
+    affine bound, largest at a corner of the instance's box; the exit is the nearest face's."""
+    corners = np.array([[x, y, z] for x in (0, 1) for y in (0, 1) for z in (0, 1)], float)
+    corners = world.min(axis=0) + corners * (world.max(axis=0) - world.min(axis=0))
+    along = corners @ away
+    bounds = []
+    for axis in range(3):
+        step = away[axis]
+        if abs(step) < 1e-12:
+            continue
+        face = hi[axis] if step > 0.0 else lo[axis]
+        bounds.append(float(np.max(along + (face - corners[:, axis]) / step)))
+    return min(bounds) if bounds else float(along.max())
+
+
+def sun_volume(topology, world_from_object, to_light, scene_bounds):
     """The shadow volume of one mesh instance under the sun (a ``Volume`` in world space).
-    ``to_light``: unit vector towards the sun;
-    ``extrusion``: how far (scene units) the far caps lie behind the casters: at least the
-    scene bounds' diagonal, so every receiver a caster can shade is inside."""
+    ``to_light``: unit vector towards the sun; ``scene_bounds``: (lo, hi), a box holding
+    every receiver. The far caps lie in one plane across the light, just past where the
+    rays from the instance leave that box (so a caster above the ground is extruded a
+    little way through it, not across the scene: the volume's fill is what it costs)."""
     to_light = np.asarray(to_light, dtype=np.float64)
     world, mirrored = _world(topology, world_from_object)
     casting, turned = _casting(topology, world, mirrored,
                                lambda corners, normals: normals @ to_light)
-    far = world - to_light * float(extrusion)
+    if not len(world):
+        return _prisms(topology, world, casting, turned, world)
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in scene_bounds)
+    away = -to_light
+    margin = 1e-3 * float(np.linalg.norm(hi - lo)) + 1e-4
+    plane = _sun_far_plane(world, away, lo - margin, hi + margin) + margin
+    far = world + (plane - world @ away)[:, None] * away
     return _prisms(topology, world, casting, turned, far)
 
 

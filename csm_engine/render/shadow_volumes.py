@@ -58,20 +58,20 @@ def volume_lights(snap, plan):
     return lights
 
 
-def _extrusion(bounds):
-    """How far the far caps lie behind their casters: past the scene's diagonal, rounded up
-    to a power of two so that an object moving inside the scene keeps the others'
-    volumes."""
+def _receivers_box(bounds):
+    """The box every receiver lies in, for the sun's far caps: the scene's bounds grown
+    outward to a grid an eighth of its diagonal (a power of two), so that an object moving
+    inside the scene keeps the other objects' volumes."""
     if bounds is None:
-        return 1.0
-    lo, hi = bounds
-    diagonal = float(np.linalg.norm(np.asarray(hi) - np.asarray(lo)))
-    return 2.0 ** math.ceil(math.log2(max(diagonal * 1.25, 1e-3)))
+        return ((-1.0, -1.0, -1.0), (1.0, 1.0, 1.0))
+    lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
+    step = 2.0 ** math.ceil(math.log2(max(float(np.linalg.norm(hi - lo)) / 8.0, 1e-3)))
+    return (tuple(np.floor(lo / step) * step - step), tuple(np.ceil(hi / step) * step + step))
 
 
 def _reach(bounds, position):
     """The farthest a receiver can be from a light at ``position``: the scene bounds'
-    farthest corner, rounded up like ``_extrusion``."""
+    farthest corner, rounded up to a power of two (see ``_receivers_box``)."""
     if bounds is None:
         return 1.0
     lo, hi = (np.asarray(b, dtype=np.float64) for b in bounds)
@@ -129,7 +129,7 @@ class ShadowVolumes:
             casting.append((mesh, matrix, matrix.tobytes()))
         volumes, batches, result = {}, {}, []
         for light in lights:
-            extent = _extrusion(bounds) if light.kind == "SUN" else \
+            extent = _receivers_box(bounds) if light.kind == "SUN" else \
                 _reach(bounds, light.vector)
             keys = tuple((mesh.serial, matrix_bytes, light.kind, light.vector, extent)
                          for mesh, _matrix, matrix_bytes in casting)

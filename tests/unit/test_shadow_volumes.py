@@ -8,6 +8,10 @@ import pytest
 from csm_engine.core import shadow_volumes as sv
 
 
+# The receivers' box the sun's volumes reach through (every test point lies in it).
+BOX = (np.full(3, -5.0), np.full(3, 5.0))
+
+
 def _box(lo=(-1.0, -1.0, -1.0), hi=(1.0, 1.0, 1.0)):
     """A closed box, outward winding, 8 corners split into 24 (as a GPU mesh splits
     corners at sharp edges) to check welding."""
@@ -101,12 +105,12 @@ def test_a_plane_is_open_and_a_repeated_corner_is_dropped():
 def test_box_under_the_sun_extrudes_only_its_silhouette():
     positions, triangles = _box()
     topo = sv.mesh_topology(positions, triangles)
-    soup = sv.sun_volume(topo, np.eye(4), np.array([0.0, 0.0, 1.0]), 10.0).soup()
+    soup = sv.sun_volume(topo, np.eye(4), np.array([0.0, 0.0, 1.0]), BOX).soup()
     # Bottom face: 2 near caps + 2 far caps; 4 silhouette edges: 8 side triangles.
     assert len(soup) == 3 * (2 + 2 + 8)
     assert _soup_is_closed(soup)
     # A sun from a corner: 3 faces away, a 6-edge silhouette.
-    soup = sv.sun_volume(topo, np.eye(4), np.array([1.0, 1.0, 1.0]) / np.sqrt(3), 10.0).soup()
+    soup = sv.sun_volume(topo, np.eye(4), np.array([1.0, 1.0, 1.0]) / np.sqrt(3), BOX).soup()
     assert len(soup) == 3 * (6 + 6 + 12)
     assert _soup_is_closed(soup)
 
@@ -148,9 +152,9 @@ def test_sun_volume_counts_what_a_ray_to_the_sun_hits(matrix, mesh):
     rng = np.random.default_rng(3)
     to_light = np.array([0.3, -0.4, 0.85])
     to_light /= np.linalg.norm(to_light)
-    soup = sv.sun_volume(topo, matrix, to_light, 20.0).soup()
+    soup = sv.sun_volume(topo, matrix, to_light, BOX).soup()
     assert _soup_is_closed(soup)
-    points = rng.uniform(-4.0, 4.0, size=(300, 3))
+    points = rng.uniform(-5.0, 5.0, size=(300, 3))
     _check_counts(positions, triangles, matrix, soup, points, to_light=to_light)
 
 
@@ -186,7 +190,7 @@ def test_two_boxes_overlapping_count_two():
     triangles = np.vstack([t1, t2 + len(p1)])
     topo = sv.mesh_topology(positions, triangles)
     assert topo.closed
-    soup = sv.sun_volume(topo, np.eye(4), np.array([0.0, 0.0, 1.0]), 10.0).soup()
+    soup = sv.sun_volume(topo, np.eye(4), np.array([0.0, 0.0, 1.0]), BOX).soup()
     np.testing.assert_allclose(_winding_number(soup, np.array([[0.0, 0.0, -2.0]])), [2.0],
                                atol=1e-6)
 
@@ -199,12 +203,25 @@ def test_a_non_manifold_edge_is_extruded_with_its_multiplicity():
     topo = sv.mesh_topology(positions, triangles)
     assert not topo.closed
     to_light = np.array([0.0, 0.0, 1.0])
-    soup = sv.sun_volume(topo, np.eye(4), to_light, 10.0).soup()
+    soup = sv.sun_volume(topo, np.eye(4), to_light, BOX).soup()
     assert _soup_is_closed(soup)
     points = np.random.default_rng(5).uniform(-1.5, 1.5, size=(200, 3))
     _check_counts(positions, triangles, np.eye(4), soup, points, to_light=to_light)
 
 
+def test_sun_volumes_end_just_past_the_receivers_box():
+    """A box a little above the floor of the receivers' box: its far cap lies just below
+    that floor, not across the scene, and points on the floor in its shadow count."""
+    positions, triangles = _box((-0.5, -0.5, 0.5), (0.5, 0.5, 1.5))
+    topo = sv.mesh_topology(positions, triangles)
+    to_light = np.array([0.2, 0.1, 1.0]) / np.linalg.norm([0.2, 0.1, 1.0])
+    scene = (np.array([-20.0, -20.0, 0.0]), np.array([20.0, 20.0, 3.0]))
+    volume = sv.sun_volume(topo, np.eye(4), to_light, scene)
+    assert volume.vertices[:, 2].min() > -1.0      # the plane across the light is tilted
+    below = np.array([[-0.3, -0.1, 0.0], [0.0, 0.0, 0.0], [0.2, 0.1, 0.0]])
+    np.testing.assert_array_less(0.5, _winding_number(volume.soup(), below))
+
+
 def test_empty_mesh_gives_no_volume():
     topo = sv.mesh_topology(np.zeros((0, 3)), np.zeros((0, 3), dtype=int))
-    assert sv.sun_volume(topo, np.eye(4), np.array([0, 0, 1.0]), 1.0).soup().shape == (0, 3)
+    assert sv.sun_volume(topo, np.eye(4), np.array([0, 0, 1.0]), BOX).soup().shape == (0, 3)
