@@ -87,8 +87,10 @@ class ShadowVolumes:
     frame's volumes, all lights together."""
 
     def __init__(self):
-        self._topologies = {}     # mesh serial -> MeshTopology of its opaque casters
-        self._volumes = {}        # (serial, matrix bytes, light, extent) -> Volume
+        self._topologies = {}     # (mesh serial, shadow modes) -> MeshTopology of its
+        #                           opaque casters
+        self._volumes = {}        # (serial, shadow modes, matrix bytes, light, extent)
+        #                           -> Volume
         self._batches = {}        # channel -> (keys, batch, triangles)
         self.builds = 0
         # What the count texture holds: (texture, G-buffer depth, ``contents``).
@@ -105,7 +107,9 @@ class ShadowVolumes:
         return tuple((light.channel, self._batches[light.channel][0]) for light in lights)
 
     def _topology(self, mesh):
-        topology = self._topologies.get(mesh.serial)
+        # A material edit may change which slots cast without a new upload.
+        key = (mesh.serial, tuple(m.shadow_mode for m in mesh.materials))
+        topology = self._topologies.get(key)
         if topology is None:
             triangles = np.asarray(mesh.triangles).reshape(-1, 3)
             materials = mesh.materials
@@ -114,7 +118,7 @@ class ShadowVolumes:
                 opaque = np.array([m.shadow_mode == 'OPAQUE' for m in materials])
                 triangles = triangles[opaque[slots]]
             topology = geometry.mesh_topology(mesh.positions, triangles)
-            self._topologies[mesh.serial] = topology
+            self._topologies[key] = topology
         return topology
 
     def batches(self, snap, cache, bounds, lights):
@@ -131,7 +135,8 @@ class ShadowVolumes:
         for light in lights:
             extent = _receivers_box(bounds) if light.kind == "SUN" else \
                 _reach(bounds, light.vector)
-            keys = tuple((mesh.serial, matrix_bytes, light.kind, light.vector, extent)
+            keys = tuple((mesh.serial, tuple(m.shadow_mode for m in mesh.materials),
+                          matrix_bytes, light.kind, light.vector, extent)
                          for mesh, _matrix, matrix_bytes in casting)
             held = self._batches.get(light.channel)
             if held is not None and held[0] == keys:
@@ -159,8 +164,8 @@ class ShadowVolumes:
             result.append(batch)
         self._volumes = volumes
         self._batches = batches
-        live = {key[0] for key in volumes}
-        self._topologies = {s: t for s, t in self._topologies.items() if s in live}
+        live = {key[:2] for key in volumes}
+        self._topologies = {k: t for k, t in self._topologies.items() if k in live}
         return result
 
 

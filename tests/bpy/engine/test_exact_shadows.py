@@ -277,3 +277,29 @@ def test_counts_are_kept_with_the_gbuffer_and_redrawn_when_the_sun_turns(empty_s
     turned = _exact(scene, 64, 48)
     assert turned.passes.gbuffers_kept == 1
     assert np.mean(turned.images["aux"][..., 0] != first.images["aux"][..., 0]) > 0.01
+
+
+def test_a_caster_with_a_hashed_shadow_casts_no_exact_shadow(empty_scene):
+    """The filter's documented choice: a material whose shadow is alpha-hashed (or
+    clipped) is left out of the volumes; the same plane made opaque casts."""
+    from tests.bpy.scenes import principled
+    scene = empty_scene
+    add_ground(20)
+    bpy.ops.mesh.primitive_plane_add(size=3.0, location=(0, 0, 2.0))
+    card = bpy.context.object
+    material = principled("card")
+    bsdf = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
+    bsdf.inputs["Alpha"].default_value = 0.6
+    if hasattr(material, "surface_render_method"):          # 4.2+
+        material.surface_render_method = 'DITHERED'
+        material.use_transparent_shadow = True
+    else:
+        material.blend_method = 'HASHED'
+        material.shadow_method = 'HASHED'
+    card.data.materials.append(material)
+    add_sun((0.2, 0.1, -1.0))
+    add_camera(scene, (6, -6, 7), (0, 0, 0))
+    shadowed = lambda: (_exact(scene, 96, 64).images["aux"][..., 0] < 0.5).sum()  # noqa: E731
+    assert shadowed() == 0
+    bsdf.inputs["Alpha"].default_value = 1.0
+    assert shadowed() > 100
