@@ -75,7 +75,7 @@ def run(argv, prog=PROG):
     lines = ["| scene | triangles | " + " | ".join(f"{f} frame ms" for f in FILTERS) +
              " | Exact / PCF | volume pass ms | lighting ms (PCF / Exact) "
              "| first Exact volume step ms (build + count) |",
-             "|---" * 8 + "|"]
+             "|---" * 9 + "|"]
     for name in args.scenes:
         scene = open_bench_scene(name, width, height)
         triangles = scene_triangles(scene)
@@ -97,7 +97,7 @@ def run(argv, prog=PROG):
         body = (f"Measured {datetime.date.today().isoformat()} at {width}x{height} on "
                 f"{_machine()}, Blender {bpy.app.version_string}, median of "
                 f"{args.repeats} profiled F12 renders after a warm-up, every pass drawn "
-                f"({(time.monotonic() - started) / 60:.0f} minutes; other jobs shared the "
+                f"({(time.monotonic() - started) / 60:.1f} minutes; other jobs shared the "
                 f"machine):\n\n```sh\nPYTHONPATH=.:tools .venv/bin/python -m "
                 f"csm_tools.exact_bench --resolution {width}x{height} --write "
                 f"docs/benchmarks.md\n```\n\n" + text + "\n")
