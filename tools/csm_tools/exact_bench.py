@@ -79,7 +79,11 @@ def run(argv, prog=PROG):
     for name in args.scenes:
         scene = open_bench_scene(name, width, height)
         triangles = scene_triangles(scene)
-        timings = {f: time_filter(scene, f, args.repeats) for f in FILTERS}
+        before = (scene.csm.shadow_filter, scene.csm.fxaa)
+        try:
+            timings = {f: time_filter(scene, f, args.repeats) for f in FILTERS}
+        finally:
+            scene.csm.shadow_filter, scene.csm.fxaa = before
         wall = {f: 1000.0 * timings[f][1]["wall"] for f in FILTERS}
         exact = timings["EXACT"][1]
         line = (f"| {name} | {triangles:,} | " +
