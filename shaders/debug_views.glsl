@@ -78,8 +78,8 @@ bool shadow_map_view(vec2 pixel, out vec3 color)
 /* The Shadow error view at surface s: where the Filter's sun visibility differs from the
  * exact one (the counted shadow volumes) by more than half, pure red (a false shadow: the
  * map darkens what the sun reaches) or pure cyan (a missed shadow); elsewhere a grey from
- * the lit image, never below 0.2 so that every surface pixel is told from the black
- * background. render/shadow_volumes.py counts the two colours for the legend: keep them
+ * the sun's exact shading, never below 0.2 so that every surface pixel is told from the
+ * black background. render/shadow_volumes.py counts the two colours for the legend: keep them
  * pure. */
 vec3 shadow_error_color(Surface s, vec3 color, float sun_visibility)
 {
@@ -96,8 +96,9 @@ vec3 shadow_error_color(Surface s, vec3 color, float sun_visibility)
   if (error > 0.5) {
     return vec3(0.0, 1.0, 1.0);
   }
-  float luma = dot(color, vec3(0.2126, 0.7152, 0.0722));
-  return vec3(0.2 + 0.5 * clamp(luma, 0.0, 1.0));
+  /* Agreement: the sun's own shading (shadow dark, lit by the angle to the sun), so the
+   * shadows read whatever the light's strength. */
+  return vec3(0.2 + 0.5 * exact * clamp(dot(s.normal, sun_l), 0.0, 1.0));
 }
 
 /* The colour of this program's Debug View at a lit surface s: `color` is the lit image
