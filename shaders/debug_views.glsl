@@ -1,8 +1,10 @@
 /* The debug views (Debug View setting) of the lighting programs built WITH_DEBUG_VIEWS:
  * the shadow map full screen or inset, cascade colours, shadow factor, texel density,
- * G-buffer channels, ambient occlusion, and the colour ramps they use. */
+ * G-buffer channels, ambient occlusion, the shadow error against the exact shadow volumes,
+ * and the colour ramps they use. */
 #include "shadow_atlas.glsl"
 #include "surface.glsl"
+#include "shadow_volume_lookup.glsl"
 
 /* Cascade 0..3 -> red, green, blue, yellow, mixed between neighbours for a fractional
  * cascade (a blend band); -1 (no cascade) -> white. */
@@ -73,6 +75,32 @@ bool shadow_map_view(vec2 pixel, out vec3 color)
   return false;
 }
 
+/* The Shadow error view at surface s: where the Filter's sun visibility differs from the
+ * exact one (the counted shadow volumes) by more than half, pure red (a false shadow: the
+ * map darkens what the sun reaches) or pure cyan (a missed shadow); elsewhere a grey from
+ * the sun's exact shading, never below 0.2 so that every surface pixel is told from the
+ * black background. render/shadow_volumes.py counts the two colours for the legend: keep them
+ * pure. */
+vec3 shadow_error_color(Surface s, vec3 color, float sun_visibility)
+{
+  vec3 sun_l = normalize(frame.sun_direction);
+  bool shadowed = frame.has_sun != 0 && frame.sun_casts_shadow != 0;
+  float exact = 1.0;
+  if (shadowed) {
+    exact = dot(s.normal, sun_l) <= 0.0 ? 0.0 : volume_visibility(ivec2(gl_FragCoord.xy));
+  }
+  float error = sun_visibility - exact;
+  if (error < -0.5) {
+    return vec3(1.0, 0.0, 0.0);
+  }
+  if (error > 0.5) {
+    return vec3(0.0, 1.0, 1.0);
+  }
+  /* Agreement: the sun's own shading (shadow dark, lit by the angle to the sun), so the
+   * shadows read whatever the light's strength. */
+  return vec3(0.2 + 0.5 * exact * clamp(dot(s.normal, sun_l), 0.0, 1.0));
+}
+
 /* The colour of this program's Debug View at a lit surface s: `color` is the lit image
  * (returned as is for the views drawn elsewhere or not at all), sun_visibility, cascade
  * and sun_tile what the sun's lookups found, ambient_visibility the AO's share of the
@@ -120,6 +148,9 @@ vec3 debug_view_color(Surface s, vec3 color, float sun_visibility, float cascade
   }
   else if (debug_view == DEBUG_AMBIENT_OCCLUSION) {
     color = vec3(ambient_visibility);
+  }
+  else if (debug_view == DEBUG_SHADOW_ERROR) {
+    color = shadow_error_color(s, color, sun_visibility);
   }
   else if (debug_view == DEBUG_SPECULAR) {
     color = vec3(s.specular, s.shininess / 256.0, s.metallic);

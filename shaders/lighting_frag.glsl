@@ -94,6 +94,13 @@ void add_sun(inout Surface s, inout vec3 color, out float visibility, out float 
   float sun_vis = (sun_shadowed && sun_n_dot_l <= 0.0) ? 0.0 : 1.0;
   int sun_lookups = (sun_shadowed && sun_tile >= 0 && sun_n_dot_l > 0.0) ?
                     (next_weight > 0.0 ? 2 : 1) : 0;
+#if SHADOW_FILTER == FILTER_EXACT
+  /* Exact: the counted shadow volumes, everywhere (no cascades, no shadow distance). */
+  sun_lookups = 0;
+  if (sun_shadowed && sun_n_dot_l > 0.0) {
+    sun_vis = volume_visibility(ivec2(gl_FragCoord.xy));
+  }
+#endif
 
   /* NOTE: llvmpipe runs both sides of an `if` (and one pass of any loop) for every pixel,
    * but leaves a loop once no pixel of its group needs another pass: in this loop a pixel
@@ -143,6 +150,13 @@ void add_point_light_range(Surface s, int first, int end, const bool shadowed,
         int tile = frame.point_shadow_tiles + 6 * i + cube_face(s.position - light.position);
         vis = shadow_tile_visibility(frame.shadow_tiles[tile], s.position, s.shadow_normal,
                                      dot(s.shadow_normal, l), light.source_radius);
+#if SHADOW_FILTER == FILTER_EXACT
+        /* The first shadowed lights have counted volumes (shadow_volume_lookup.glsl). */
+        int c = point_volume_channel(i);
+        if (c > 0) {
+          vis = volume_visibility_in(ivec2(gl_FragCoord.xy), c);
+        }
+#endif
       }
 #endif
       color += light.color * attenuation * vis * surface_response(s, l);
@@ -166,6 +180,7 @@ void add_point_lights(Surface s, inout vec3 color)
 void add_spot_lights(Surface s, inout vec3 color)
 {
   int spot_count = frame.spot_light_count;
+  int shadowed_rank = 0;   /* shadowed spots before this one */
   for (int i = 0; i < MAX_SPOT_LIGHTS; i++) {
     if (i >= spot_count) {
       break;
@@ -179,10 +194,17 @@ void add_spot_lights(Surface s, inout vec3 color)
         vis = shadow_tile_visibility(frame.shadow_tiles[spot.shadow_tile], s.position,
                                      s.shadow_normal, dot(s.shadow_normal, l),
                                      spot.source_radius);
+#if SHADOW_FILTER == FILTER_EXACT
+        int c = spot_volume_channel(shadowed_rank);
+        if (c > 0) {
+          vis = volume_visibility_in(ivec2(gl_FragCoord.xy), c);
+        }
+#endif
       }
       color += spot.color * attenuation * vis * surface_response(s, l);
       add_to_light_passes(s, l, spot.color * attenuation * vis);
     }
+    shadowed_rank += spot.shadow_tile >= 0 ? 1 : 0;
   }
 }
 
@@ -247,6 +269,12 @@ void main()
   if (depth <= 0.0) {
     /* Background: the World colour; alpha 0 with Film > Transparent. */
     out_color = vec4(frame.background_color, frame.background_alpha);
+#ifdef WITH_DEBUG_VIEWS
+    if (frame.debug_view == DEBUG_SHADOW_ERROR) {
+      /* Black, so the view's surface pixels can be counted (render/shadow_volumes.py). */
+      out_color = vec4(0.0, 0.0, 0.0, 1.0);
+    }
+#endif
     out_aux = vec4(1.0, -1.0, 1e10, 0.0);
     write_no_surface_passes();
     return;

@@ -1,11 +1,13 @@
 /* One shadow tile's visibility for a world point: the normal offset, constant and slope
  * biases (set in texels, converted with the tile's own texel size), the projection into the
- * tile, then this program's shadow filter (hard, PCF or soft), and how far that filter
+ * tile, then this program's shadow filter (hard, PCF or soft; Exact takes the hard tap
+ * for the lights without shadow volumes), and how far that filter
  * reads around a point. The sun's cascades, spot lights and point lights' cube faces all
  * look up their tiles here. */
 #include "shadow_atlas.glsl"
 #include "shadow_pcf.glsl"
 #include "shadow_soft.glsl"
+#include "shadow_volume_lookup.glsl"
 
 /* NOTE: the filter is chosen when the program is built (SHADOW_FILTER, one program per
  * Shadow Filter setting), not by a uniform: llvmpipe runs the code of a branch not taken
@@ -65,7 +67,9 @@ float shadow_tile_visibility(ShadowTileData tile, vec3 p, vec3 n, float n_dot_l,
   vec2 texel_world_xy = tile.texel_world_xy * (texel_world / tile.texel_world);
   return soft_shadow(tile, light_size, texel, compare, depth_per_texel, receiver,
                      texel_world_xy);
-#elif SHADOW_FILTER == FILTER_HARD
+#elif SHADOW_FILTER == FILTER_HARD || SHADOW_FILTER == FILTER_EXACT
+  /* Exact: the sun's volumes replace its cascades (shadow_volume_lookup.glsl); spot and
+   * point lights have no volumes and keep their maps' hard tap. */
   return shadow_tap(origin, last_texel, texel, texel, compare, depth_per_texel);
 #else
   return pcf_shadow(origin, last_texel, texel, compare, depth_per_texel);

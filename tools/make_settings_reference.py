@@ -97,7 +97,8 @@ WHEN = {
     "shadow_filter":
         "PCF for crisp, even edges (the course's method). Soft (light size) for "
         "penumbrae like Cycles': set the sun's Angle (Light properties) first. Hard to "
-        "see the raw shadow map's texels.",
+        "see the raw shadow map's texels. Exact for the ray-traced hard shadow at every "
+        "pixel, at about two to three times PCF's frame time (docs/benchmarks.md).",
     "pcf_radius":
         "Raise it for softer edges (it costs a little more each step); 0 shows the "
         "texels' stair steps. The course asks for a PCF kernel: 1 is 3x3.",
@@ -140,7 +141,8 @@ WHEN = {
     "debug_view":
         "Cascades to see the splits and the blend band; Shadow factor to judge "
         "shadows without materials; Texel density to see where the shadow map is too "
-        "coarse; the G-buffer views to check a material or a mesh's normals.",
+        "coarse; Shadow error to see where the Filter's shadow is wrong against the "
+        "exact one; the G-buffer views to check a material or a mesh's normals.",
     "debug_shadow_map":
         "With View: Shadow map, pick the cascade (0 is the nearest) or spot light "
         "whose map you want to see.",

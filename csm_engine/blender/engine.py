@@ -180,6 +180,8 @@ class CSMRenderEngine(bpy.types.RenderEngine):
             self.report({'ERROR'}, "CSM: " + request.result.error)
         for warning in request.result.warnings:
             self.report({'WARNING'}, "CSM: " + warning)
+        if request.result.shadow_error is not None:
+            self.report({'INFO'}, "CSM: Shadow error: " + request.result.shadow_error.label)
 
     def _stats(self, text):
         # In background mode Blender prints every stats line ("Fra:1 Mem:..."); there the
@@ -266,9 +268,11 @@ class CSMRenderEngine(bpy.types.RenderEngine):
             gpu.state.blend_set('ALPHA_PREMULT' if snap.film_transparent else 'NONE')
             plan = self.pipeline.draw_viewport(snap, self.cache, region.width,
                                                region.height, fxaa=bool(snap.settings.fxaa))
-            if overlays.cascade_legend(snap, plan):
+            rows = overlays.legend_rows(snap, plan, self.pipeline.shadow_error)
+            if rows:
                 draw_cascade_legend(snap, plan, region.width, region.height,
-                                    *legend_room(context), context.preferences.system.ui_scale)
+                                    *legend_room(context), context.preferences.system.ui_scale,
+                                    rows=rows)
             self._viewport_error = None
         except Exception as error:
             # The viewport shows the reason instead of a stale or half-drawn frame; the
@@ -432,12 +436,12 @@ def legend_room(context):
     return max(left, frame_left), max(bottom, frame_bottom)
 
 
-def draw_cascade_legend(snap, plan, width, height, left=0, bottom=0, scale=1.0):
+def draw_cascade_legend(snap, plan, width, height, left=0, bottom=0, scale=1.0, rows=None):
     """The cascade-colour legend over a viewport frame drawn with ``plan``, in the bound
     framebuffer: nothing unless Debug View is Cascades. (``left``, ``bottom``): the
     corner the legend keeps inside (``legend_room``); ``scale``: the UI scale.
     Drawn after FXAA, so the swatches and text stay crisp; final renders get none."""
-    rows = overlays.cascade_legend(snap, plan)
+    rows = overlays.cascade_legend(snap, plan) if rows is None else rows
     if not rows:
         return
     import blf

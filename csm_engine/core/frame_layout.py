@@ -27,7 +27,8 @@ MAX_SHADOW_TILES = MAX_CASCADES + MAX_SPOT_LIGHTS + 6 * MAX_POINT_SHADOWS
 # Identifiers as the Blender settings spell them (EnumProperty items); the GLSL value of
 # each is its position here, so only ever append.
 DEBUG_VIEWS = ("NONE", "CASCADES", "SHADOW_FACTOR", "SHADOW_MAP", "TEXEL_DENSITY", "ALBEDO",
-               "NORMAL", "POSITION", "DEPTH", "SPECULAR", "AMBIENT_OCCLUSION")
+               "NORMAL", "POSITION", "DEPTH", "SPECULAR", "AMBIENT_OCCLUSION",
+               "SHADOW_ERROR")
 PCF_PATTERNS = ("GRID", "CROSS5", "NINE_TAP")
 SPLIT_SCHEMES = ("UNIFORM", "LOG", "HYBRID", "MANUAL")
 # How a point or spot light dims with distance (docs/lighting.md): PHYSICAL is EEVEE's
@@ -35,8 +36,9 @@ SPLIT_SCHEMES = ("UNIFORM", "LOG", "HYBRID", "MANUAL")
 # course's 1 - d/radius.
 LIGHT_FALLOFFS = ("PHYSICAL", "LINEAR_RADIUS")
 # How shadow edges are filtered: one hard tap, the fixed PCF kernel (radius and pattern
-# settings), or soft shadows whose penumbra follows the light's size (PCSS).
-SHADOW_FILTERS = ("HARD", "PCF", "SOFT")
+# settings), soft shadows whose penumbra follows the light's size (PCSS), or the sun's
+# exact hard shadow by shadow volumes.
+SHADOW_FILTERS = ("HARD", "PCF", "SOFT", "EXACT")
 # Which cascade a pixel reads: the finest whose shadow map holds it (as the DirectX SDK's
 # Map Selection and MJP's Projection mode), or the one whose view-depth slice holds it
 # (interval selection, the course's bands).

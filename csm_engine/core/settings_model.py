@@ -268,11 +268,17 @@ _SETTINGS = (
             SOFT=("Soft (light size)", "Penumbrae from the light's real size (sun Angle, "
                                        "spot Radius): sharp at contact, wider with distance, "
                                        "as in Cycles (PCSS: blocker search, then a variable "
-                                       "filter)")),
+                                       "filter)"),
+            EXACT=("Exact (shadow volumes)", "Exact hard shadows, counted per pixel through "
+                                             "shadow volumes as a ray cast would see them: "
+                                             "no biases, no resolution. The sun and the first "
+                                             "three shadowed point or spot lights; further "
+                                             "lights keep their maps' hard tap. Casters with "
+                                             "an alpha-clipped or hashed shadow cast none")),
         description="Shadow filter: how shadow edges are filtered: one hard tap, the fixed "
-                    "PCF kernel below, or soft shadows whose penumbra widens with the "
+                    "PCF kernel below, soft shadows whose penumbra widens with the "
                     "distance to the caster as the sun's Angle and a spot light's Radius say "
-                    "(PCSS)"),
+                    "(PCSS), or exact hard shadows by shadow volumes"),
     Setting(
         "pcf_radius", "Radius", INT, 1, FILTERING, min=0, max=8,
         active_when=_when(shadow_filter="PCF"),
@@ -371,7 +377,11 @@ _SETTINGS = (
                                             "(green)"),
             AMBIENT_OCCLUSION=("Ambient occlusion", "The factor the ambient light is "
                                                     "multiplied by: white open, black fully "
-                                                    "occluded")),
+                                                    "occluded"),
+            SHADOW_ERROR=("Shadow error", "Where the Filter's sun shadow disagrees with the "
+                                          "exact one (shadow volumes): red a false shadow, "
+                                          "cyan a missed one, grey where they agree; the "
+                                          "share of surface pixels wrong is in the legend")),
         description="Debug view: what the engine shows: the lit image or a diagnostic view"),
     Setting(
         "debug_shadow_map", "Map", INT, 0, DEBUG, min=0, max=11, preset=False,

@@ -67,6 +67,12 @@ class GPUMesh:
     serial: int = 0                # unique per upload (see _SERIALS)
     has_tangents: bool = False     # the vertex buffer has "tan" (normal-mapped materials)
     upload_bytes: int = 0          # vertex and index data this upload sent to the GPU
+    # The arrays uploaded, kept on the CPU for the Exact filter's shadow volumes
+    # (render/shadow_volumes.py): positions (N, 3), triangles (T, 3), material slot per
+    # triangle (T,).
+    positions: np.ndarray = None
+    triangles: np.ndarray = None
+    material_index: np.ndarray = None
 
 
 class Uploads(NamedTuple):
@@ -134,5 +140,6 @@ def upload(positions, normals, uvs, triangles, material_index, object_bounds, ma
                    aabb_min=aabb_min.astype(np.float64), aabb_max=aabb_max.astype(np.float64),
                    triangle_count=len(triangles), vertex_buffer=vbo, index_buffers=ibos,
                    serial=next(_SERIALS), has_tangents=with_tangents,
-                   upload_bytes=upload_bytes)
+                   upload_bytes=upload_bytes, positions=positions, triangles=triangles,
+                   material_index=material_index)
 

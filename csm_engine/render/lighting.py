@@ -9,7 +9,8 @@ from . import shaders
 from .overlays import draw_frozen_cascades
 
 # The lighting program of each Shadow Filter setting (shaders.py builds one per filter).
-LIGHTING_PROGRAMS = {"HARD": "lighting_hard", "PCF": "lighting", "SOFT": "lighting_soft"}
+LIGHTING_PROGRAMS = {"HARD": "lighting_hard", "PCF": "lighting", "SOFT": "lighting_soft",
+                     "EXACT": "lighting_exact"}
 
 
 def lighting_program(snap):
@@ -27,14 +28,15 @@ def lighting_program(snap):
 
 def draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlusion,
                   target_fb, width, height, depth_tested=False, overlays=True,
-                  passes=False):
+                  passes=False, volume_count=None):
     """Shade ``gbuffer`` (``gbuffer.GBuffer``) with the shadow ``atlas``
     (``shadow_atlas.ShadowAtlas``) and ``ambient_occlusion`` (its ``AmbientOcclusion`` or
     None) into ``target_fb`` (None: the bound framebuffer). ``depth_tested``: the target
     has the G-buffer's depth attached. ``overlays``: then draw ``plan``'s frozen
     cascades. ``passes``: draw with the PASSES programs, which also write the light and
     colour passes into ``target_fb``'s colour slots 2.. (``passes.LIGHTING_PASS_TARGETS``).
-    """
+    ``volume_count``: the shadow-volume pass's count (``shadow_volumes``), for Filter Exact
+    and the Shadow error view."""
     import gpu
     library = shaders.LIBRARY
     program = lighting_program(snap)
@@ -74,6 +76,8 @@ def draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlus
         lighting.uniform_sampler("ambient_occlusion", ao_texture)
         lighting.uniform_sampler("gbuffer_emission", gbuffer.emission)
         lighting.uniform_sampler("gbuffer_facet", gbuffer.facet)
+        lighting.uniform_sampler("shadow_volume_count",
+                                 targets.white() if volume_count is None else volume_count)
         targets.call(targets.fullscreen_batch().draw, lighting)
         gpu.state.depth_test_set('NONE')
         if overlays and plan.frozen_camera is not None:

@@ -1,10 +1,11 @@
 """Overlays drawn over the lit image: the frozen cascades' light-space boxes and the
-viewport's cascade-colour legend.
+viewport's cascade-colour legend (or the Shadow error view's shares).
 
 Owns ``draw_frozen_cascades`` (coloured lines, one colour per cascade, while Freeze
 Cascades holds them), ``draw_overlays`` (the same into a given framebuffer, after
 anti-aliasing, so 1-pixel lines stay crisp), and the legend's rows (``cascade_legend``:
-colour and depth range of each cascade, while the Cascades view is on), its layout
+colour and depth range of each cascade, while the Cascades view is on; ``legend_rows``
+adds the Shadow error view's false and missed shares), its layout
 in pixels (``legend_layout``) and its panel and swatches (``draw_legend_swatches``). The
 legend's text is Blender's (``blf``), so the engine writes it; final renders get no
 legend, so their Combined pass holds only the scene.
@@ -108,6 +109,22 @@ def cascade_legend(snap, plan):
         rows.append(LegendRow(index + 1, CASCADE_VIEW_COLORS[index],
                               f"{index + 1}  {metres(near)}-{metres(far)} m"))
     return rows
+
+
+# The Shadow error view's colours (debug_views.glsl's shadow_error_color).
+SHADOW_ERROR_COLORS = ((1.0, 0.0, 0.0), (0.0, 1.0, 1.0))
+
+
+def legend_rows(snap, plan, shadow_error=None):
+    """The legend's rows for this frame: the cascades' in the Cascades view, the shares of
+    false and missed shadow in the Shadow error view (``shadow_error``: the pipeline's
+    ``ShadowError`` of the frame), none otherwise."""
+    if snap.settings.debug_view == "SHADOW_ERROR" and shadow_error is not None:
+        return [LegendRow(1, SHADOW_ERROR_COLORS[0],
+                          f"false shadow {100 * shadow_error.false_shadow:.2f} %"),
+                LegendRow(2, SHADOW_ERROR_COLORS[1],
+                          f"missed shadow {100 * shadow_error.missed_shadow:.2f} %")]
+    return cascade_legend(snap, plan)
 
 
 class LegendLayout(NamedTuple):

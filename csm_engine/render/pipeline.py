@@ -13,6 +13,8 @@ The passes, one module each:
 - ``gbuffer``: what the camera sees, per pixel;
 - ``visible_depth``: the G-buffer's depth range per block, for Fit to Visible Depth;
 - ``ambient_occlusion``: half-resolution AO from the G-buffer;
+- ``shadow_volumes``: the sun's shadow volumes counted per pixel (Filter Exact, and the
+  Shadow error view);
 - ``lighting``: shading (and debug views) into the target;
 - ``overlays``: the frozen cascades' boxes;
 - ``antialiasing``: viewport FXAA, final-render FXAA or jittered samples;
@@ -32,6 +34,7 @@ from ..core.shadow_plan import gbuffer_plan, pack_frame, plan_shadows
 from ..core.view_state import ShadowViewState
 from . import antialiasing, passes as render_passes, shaders
 from .ambient_occlusion import draw_ambient_occlusion
+from .blocker_search import nearest_blocks
 from .draw_lists import HeldDrawLists
 from .gbuffer import draw_gbuffer
 from .lighting import draw_lighting
@@ -39,8 +42,8 @@ from .readback import read_images, read_target
 # RenderTargetError: what the engine tells the user when a target cannot be allocated.
 from .resources import RenderTargetError, Targets  # noqa: F401
 from .result import PassCounts, RenderResult
-from .blocker_search import nearest_blocks
 from .shadow_atlas import allocate_atlas, draw_shadow_atlas
+from .shadow_volumes import ShadowVolumes, draw_shadow_volumes, shadow_error, volume_lights
 from .visible_depth import VisibleDepth
 
 
@@ -69,6 +72,18 @@ class Pipeline:
         self.cryptomatte_materials = set()
         # The Normal pass of an anti-aliased render: the first (unjittered) sample's.
         self.first_sample_normals = None
+        self.shadow_error = None        # the last Shadow error view's ShadowError
+        # The last frame's shadow-volume counts (RGBA32F: the sun, then up to three local
+        # lights; above zero in shadow), None when it counted none: for a render pass.
+        self.volume_count = None
+
+    @property
+    def shadow_volumes(self):
+        """The Exact filter's volume geometry, kept with the resources (``ShadowVolumes``)."""
+        resources = self.targets.resources
+        if resources.shadow_volumes is None:
+            resources.shadow_volumes = ShadowVolumes()
+        return resources.shadow_volumes
 
     @property
     def profile(self):
@@ -199,12 +214,26 @@ class Pipeline:
         if ambient_occlusion is not None:
             t = self._sync(ambient_occlusion.framebuffer, "ao", t)
 
+        volume_count = None
+        lights = volume_lights(snap, plan)
+        if lights:
+            volume_count, volume_fb = draw_shadow_volumes(
+                targets, self.shadow_volumes, snap, cache, bounds, lights, frame_ubo,
+                gbuffer, width, height, gbuffer_kept)
+            t = self._sync(volume_fb, "shadow_volumes", t)
+
         draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlusion,
-                      target_fb, width, height, depth_tested, overlays, lighting_passes)
+                      target_fb, width, height, depth_tested, overlays, lighting_passes,
+                      volume_count)
         if target_fb is not None:
             t = self._sync(target_fb, "lighting", t)
+        self.shadow_error = None
+        if volume_count is not None and snap.settings.debug_view == "SHADOW_ERROR" and \
+                targets.records:
+            self.shadow_error = shadow_error(target_fb, width, height)
 
         self.gbuffer_fb = gbuffer.framebuffer
+        self.volume_count = volume_count
         self.last_frame = _counts(targets, tiles, gbuffer_kept, ambient_occlusion)
         self.last_plan = plan
         self.timings["total"] = time.perf_counter() - start
@@ -269,7 +298,8 @@ class Pipeline:
                                                           self.cryptomatte_materials)
         self.timings["readback"] = time.perf_counter() - t
         return RenderResult(images=images, plan=plan, timings=dict(self.timings),
-                            passes=counts, warnings=list(self.warnings), metadata=metadata)
+                            passes=counts, warnings=list(self.warnings), metadata=metadata,
+                            shadow_error=self.shadow_error)
 
 
 def _counts(targets, tiles, gbuffer_kept, ambient_occlusion):

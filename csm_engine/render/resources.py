@@ -89,11 +89,15 @@ class RenderResources:
     def __init__(self):
         self.textures = {}
         self.frame_cache = FrameCache()
+        # The Exact filter's volume geometry (``shadow_volumes.ShadowVolumes``), kept with
+        # the textures so that final renders, one Pipeline each, share it too.
+        self.shadow_volumes = None
 
     def clear(self):
         """Drop every texture (and so what they held)."""
         self.textures.clear()
         self.frame_cache.forget()
+        self.shadow_volumes = None
 
 
 class Targets:

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field, fields
 # Steps a final render times, in the order they run (seconds). Blender's own work around
 # the engine (depsgraph evaluation, writing the image) is whatever the wall clock adds.
 TIMED_STEPS = ("scene_read", "mesh_upload", "python_setup", "shadow", "gbuffer", "depth_range",
-               "ao", "lighting",
+               "ao", "shadow_volumes", "lighting",
                "fxaa", "antialiasing", "readback")
 
 
@@ -44,6 +44,9 @@ class RenderResult:
     warnings: list = field(default_factory=list)
     error: str = None
     metadata: dict = field(default_factory=dict)  # key -> text for the image (Cryptomatte)
+    # The Shadow error view's counts (render/shadow_volumes.py ShadowError), None in any
+    # other view.
+    shadow_error: object = None
 
     @property
     def ok(self):

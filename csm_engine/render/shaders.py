@@ -189,13 +189,21 @@ PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_normal"),
                            outputs=(("VEC2", "out_ao_depth"),),
                            defines=(("AO_BLUR", "1"),))
 PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),
-                                     ("FLOAT_2D", "shadow_nearest_blocks"))
+                                     ("FLOAT_2D", "shadow_nearest_blocks"),
+                                     ("FLOAT_2D", "shadow_volume_count"))
+# The Exact filter's shadow volumes counted per pixel (render/shadow_volumes.py).
+PROGRAMS["shadow_volume"] = dict(
+    vertex="shadow_volume_vert.glsl", fragment="shadow_volume_frag.glsl",
+    inputs=(("pos", "VEC3"),), interface=(("volume_depth", "FLOAT", "smooth"),),
+    push=(("VEC4", "channel"),),
+    samplers=(("FLOAT_2D", "gbuffer_depth"),), frame=True,
+    outputs=(("VEC4", "out_count"),))
 
 # One lighting program per Shadow Filter setting (SHADOW_FILTER, see shadow_lookup.glsl): the
 # plain "lighting" is PCF. Each has "_points" and "_spots" twins with the point- and
 # spot-light loops (POINT_LIGHTS, SPOT_LIGHTS), used when the scene has such lights:
 # llvmpipe pays for a loop's first pass even when it runs no times.
-for _filter in ("HARD", "SOFT"):
+for _filter in ("HARD", "SOFT", "EXACT"):
     PROGRAMS["lighting_" + _filter.lower()] = dict(
         PROGRAMS["lighting"], defines=(("SHADOW_FILTER", f"FILTER_{_filter}"),))
 # And each of those a "_debug" twin with the debug views (WITH_DEBUG_VIEWS), for the same
