@@ -1,35 +1,182 @@
-/* The surface's response to one light (BRDF), in EEVEE's light units: Lambert diffuse and
- * energy-normalized Blinn-Phong specular with Principled BSDF's Specular and Metallic.
- * docs/lighting.md explains the units. */
+/* The Principled BSDF as Cycles evaluates it for direct light (Blender 4.x/5.x, Multiscatter
+ * GGX): a metallic GGX lobe with the F82-tint Fresnel, a dielectric GGX specular layer whose
+ * Fresnel is the real one of the IOR (Specular IOR Level applied), its directional albedo
+ * taken out of the Lambert diffuse beneath it, and multiple-scattering energy compensation
+ * on both lobes. The view-dependent part (table lookups, layer weights) is computed once
+ * per pixel (principled_setup); each light then costs one lobe evaluation
+ * (principled_eval). Tables: core/bsdf_tables.py, in the bsdf_lut texture. Units as EEVEE's
+ * (docs/lighting.md): the result is radiance for an irradiance of one. */
 
 const float PI = 3.14159265358979;
-/* Principled BSDF's convention: Specular level 0.5 is a reflectance of 0.04 at normal
- * incidence (glass, plastic), so F0 = 0.08 * level. */
+/* Principled's convention: Specular IOR Level 0.5 at IOR 1.5 is a reflectance of 0.04 at
+ * normal incidence, so the G-buffer's specular value s stands for F0 = 0.08 * s. */
 const float F0_PER_SPECULAR_LEVEL = 0.08;
 
-/* Outgoing radiance for an irradiance of one (W/m^2 on a surface facing the light), with
- * Principled's Metallic: a metal has no diffuse part and reflects its base colour,
- * F0 = mix(0.08 * specular, base colour, metallic); blinn_phong below is the dielectric. */
-vec3 surface_brdf(vec3 albedo, float metallic, float specular, float shininess, vec3 n,
-                  vec3 l, vec3 v)
+/* What a pixel's BSDF needs for every light, from its material and the view. */
+struct Principled {
+  vec3 diffuse_color;  /* Lambert albedo left under the specular layer (Cycles' DiffCol) */
+  vec3 specular_color; /* what the metal and specular lobes reflect of a uniform World
+                        * (Cycles' GlossCol) */
+  vec3 metal_f0;       /* base colour: the metal's reflectance at normal incidence */
+  vec3 metal_scale;    /* Metallic x multiple-scattering compensation of the metal lobe */
+  float specular_scale; /* (1 - Metallic) x compensation of the dielectric lobe */
+  float f0;            /* dielectric reflectance at normal incidence */
+  float eta;           /* the IOR that has it (1: no specular layer) */
+  float alpha2;        /* GGX alpha^2 = roughness^4 */
+  float n_dot_v;
+};
+
+/* One table value (core/bsdf_tables.py's layout). */
+float lut_value(int row, int column)
 {
-  float n_dot_l = max(dot(n, l), 0.0);
-  if (n_dot_l <= 0.0) {
-    return vec3(0.0);
-  }
-  vec3 h = normalize(l + v);
-  float exponent = max(shininess, 1.0);
-  vec3 f0 = mix(vec3(F0_PER_SPECULAR_LEVEL * specular), albedo, metallic);
-  float lobe = (exponent + 8.0) / (8.0 * PI) * pow(max(dot(n, h), 0.0), exponent);
-  return (albedo * ((1.0 - metallic) / PI) + f0 * lobe) * n_dot_l;
+  return texelFetch(bsdf_lut, ivec2(column, row), 0).r;
 }
 
-/* Outgoing radiance for an irradiance of one (W/m^2 on a surface facing the light): the
- * BRDF times cos(angle to the light). Units as EEVEE's (docs/lighting.md): diffuse is
- * Lambert, albedo / pi; specular is energy-normalized Blinn-Phong,
- * F0 (n + 8) / (8 pi) (n.h)^n, whose lobe reflects about F0 of the light whatever the
- * exponent, so a white surface never sends back more than it receives. */
-vec3 blinn_phong(vec3 albedo, float specular, float shininess, vec3 n, vec3 l, vec3 v)
+/* Linear interpolation along a row of n nodes at x in 0..1 (nodes at i / (n - 1)), as
+ * Cycles' lookup_table_read. */
+float lut_row(int row, int first_column, int n, float x)
 {
-  return surface_brdf(albedo, 0.0, specular, shininess, n, l, v);
+  float position = clamp(x, 0.0, 1.0) * float(n - 1);
+  int i = min(int(position), n - 1);
+  int j = min(i + 1, n - 1);
+  return mix(lut_value(row, first_column + i), lut_value(row, first_column + j),
+             position - float(i));
+}
+
+/* A table of n x n nodes (x along a row, y across rows) at (x, y). */
+float lut_table(int first_row, int first_column, int n, float x, float y)
+{
+  float position = clamp(y, 0.0, 1.0) * float(n - 1);
+  int i = min(int(position), n - 1);
+  int j = min(i + 1, n - 1);
+  return mix(lut_row(first_row + i, first_column, n, x),
+             lut_row(first_row + j, first_column, n, x), position - float(i));
+}
+
+float f0_from_ior(float eta)
+{
+  float r = (eta - 1.0) / (eta + 1.0);
+  return r * r;
+}
+
+float ior_from_f0(float f0)
+{
+  float root = sqrt(clamp(f0, 0.0, 0.99));
+  return (1.0 + root) / (1.0 - root);
+}
+
+/* Unpolarized Fresnel reflectance of a dielectric of relative IOR eta (Cycles'
+ * fresnel_dielectric_cos). */
+float fresnel_dielectric(float cos_i, float eta)
+{
+  float c = abs(cos_i);
+  float g = eta * eta - 1.0 + c * c;
+  if (g <= 0.0) {
+    return 1.0;
+  }
+  g = sqrt(g);
+  float a = (g - c) / (g + c);
+  float b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
+  return 0.5 * a * a * (1.0 + b * b);
+}
+
+/* Smith's Lambda for GGX. */
+float ggx_lambda(float alpha2, float cos_n)
+{
+  float tan2 = max(1.0 / (cos_n * cos_n) - 1.0, 0.0);
+  return 0.5 * (sqrt(1.0 + alpha2 * tan2) - 1.0);
+}
+
+/* Kulla-Conty's multiple-scattering Fresnel (Fms, with one Fss cancelled as Cycles does). */
+vec3 multiscatter_fresnel(vec3 fss, float e_avg)
+{
+  return fss * e_avg / (1.0 - fss * (1.0 - e_avg));
+}
+
+/* The view-dependent part of the BSDF at a surface of normal n seen from direction v:
+ * base colour, Metallic, specular (F0 / 0.08, Specular IOR Level applied) and Roughness. */
+Principled principled_setup(vec3 base, float metallic, float specular, float roughness,
+                            vec3 n, vec3 v)
+{
+  Principled p;
+  float r = clamp(roughness, 0.0, 1.0);
+  float alpha = r * r;
+  float mu = clamp(dot(n, v), 0.0, 1.0);
+  float m = clamp(metallic, 0.0, 1.0);
+  p.alpha2 = alpha * alpha;
+  p.n_dot_v = dot(n, v);
+  float e = lut_table(BSDF_LUT_E_ROW, 0, BSDF_LUT_E_SIZE, r, mu);
+  float e_avg = lut_row(BSDF_LUT_E_AVG_ROW, 0, BSDF_LUT_E_SIZE, r);
+  float missing = (1.0 - e) / max(e, 1e-6);
+
+  /* Metal: F82-tint with a white tint is Schlick's Fresnel from the base colour; its
+   * hemispherical average is F0 + (1 - F0) / 21. */
+  p.metal_f0 = clamp(base, 0.0, 1.0);
+  vec3 metal_fss = mix(p.metal_f0, vec3(1.0), 1.0 / 21.0);
+  vec3 metal_fms = multiscatter_fresnel(metal_fss, e_avg);
+  p.metal_scale = m * (1.0 + metal_fms * missing);
+  float s5 = lut_table(BSDF_LUT_S5_ROW, 0, BSDF_LUT_S_SIZE, r, mu);
+  p.specular_color = m * (e + metal_fms * (1.0 - e)) * mix(p.metal_f0, vec3(1.0), s5);
+
+  /* Dielectric specular layer over the diffuse (weight 1 - Metallic). */
+  float weight = 1.0 - m;
+  p.f0 = min(F0_PER_SPECULAR_LEVEL * max(specular, 0.0), 0.99);
+  p.eta = p.f0 > 0.0 ? ior_from_f0(p.f0) : 1.0;
+  float layer = 1.0;
+  p.specular_scale = 0.0;
+  if (p.eta != 1.0) {
+    float real_f0 = f0_from_ior(p.eta);
+    /* Kulla-Conty's fit of the real Fresnel's hemispherical average (as Cycles). */
+    float real_fss = (p.eta - 1.0) / (4.08567 + 1.00071 * p.eta);
+    float fss = mix(p.f0, 1.0, clamp((real_fss - real_f0) / (1.0 - real_f0), 0.0, 1.0));
+    float fms = multiscatter_fresnel(vec3(fss), e_avg).x;
+    p.specular_scale = weight * (1.0 + fms * missing);
+    /* The layer's albedo for this view: the table's share of the way from F0 to 1. */
+    float z = sqrt(abs((p.eta - 1.0) / (p.eta + 1.0)));
+    float slice = clamp(z, 0.0, 1.0) * float(BSDF_LUT_S_SIZE - 1);
+    int k = min(int(slice), BSDF_LUT_S_SIZE - 1);
+    int k1 = min(k + 1, BSDF_LUT_S_SIZE - 1);
+    float s_ior = mix(
+        lut_table(BSDF_LUT_S_IOR_ROW, k * BSDF_LUT_S_SIZE, BSDF_LUT_S_SIZE, r, mu),
+        lut_table(BSDF_LUT_S_IOR_ROW, k1 * BSDF_LUT_S_SIZE, BSDF_LUT_S_SIZE, r, mu),
+        slice - float(k));
+    float albedo = (e + fms * (1.0 - e)) * mix(p.f0, 1.0, s_ior);
+    p.specular_color += weight * albedo;
+    layer = clamp(1.0 - albedo, 0.0, 1.0);
+  }
+  p.diffuse_color = max(base, 0.0) * weight * layer;
+  return p;
+}
+
+/* Radiance towards v for an irradiance of one from direction l, split into the diffuse
+ * and the specular (metal + dielectric) lobes. */
+void principled_eval(Principled p, vec3 n, vec3 v, vec3 l, out vec3 diffuse,
+                     out vec3 specular)
+{
+  float n_dot_l = dot(n, l);
+  diffuse = p.diffuse_color * (max(n_dot_l, 0.0) / PI);
+  specular = vec3(0.0);
+  /* Cycles evaluates no lobe for a view below the surface, nor a near-mirror lobe
+   * (alpha^2 <= 1e-7) for a point light: its highlight is a delta. */
+  if (n_dot_l <= 0.0 || p.n_dot_v <= 0.0 || p.alpha2 <= 1e-7) {
+    return;
+  }
+  vec3 h = normalize(l + v);
+  float n_dot_h = dot(n, h);
+  float h_dot_v = clamp(dot(h, v), 0.0, 1.0);
+  float t = 1.0 + (p.alpha2 - 1.0) * n_dot_h * n_dot_h;
+  float d = p.alpha2 / (PI * t * t);
+  float g = 1.0 / (1.0 + ggx_lambda(p.alpha2, p.n_dot_v) + ggx_lambda(p.alpha2, n_dot_l));
+  float lobe = d * g / (4.0 * p.n_dot_v);
+  float x = 1.0 - h_dot_v;
+  float x2 = x * x;
+  vec3 metal_f = mix(p.metal_f0, vec3(1.0), x2 * x2 * x);
+  float dielectric_f = 0.0;
+  if (p.eta != 1.0) {
+    float real_f0 = f0_from_ior(p.eta);
+    float s = clamp((fresnel_dielectric(h_dot_v, p.eta) - real_f0) / (1.0 - real_f0), 0.0,
+                    1.0);
+    dielectric_f = mix(p.f0, 1.0, s);
+  }
+  specular = lobe * (p.metal_scale * metal_f + p.specular_scale * dielectric_f);
 }

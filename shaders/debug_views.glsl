@@ -122,7 +122,7 @@ vec3 debug_view_color(Surface s, vec3 color, float sun_visibility, float cascade
     color = vec3(ambient_visibility);
   }
   else if (debug_view == DEBUG_SPECULAR) {
-    color = vec3(s.specular, s.shininess / 256.0, s.metallic);
+    color = vec3(s.specular, s.roughness, s.metallic);
   }
   return color;
 }

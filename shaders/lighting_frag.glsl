@@ -15,19 +15,16 @@
 #include "terminator.glsl"
 #include "debug_views.glsl"
 
-/* Outgoing radiance of surface s for an irradiance of one from direction l (surface_brdf). */
-vec3 surface_response(Surface s, vec3 l)
-{
-  return surface_brdf(s.albedo, s.metallic, s.specular, s.shininess, s.normal, l, s.to_camera);
-}
-
 /* The World's light on surface s, darkened by ambient occlusion (its share of the light
  * reaching s in `visibility`). */
 vec3 ambient_light(Surface s, ivec2 px, out float visibility)
 {
-  /* A uniform World of radiance L: irradiance pi * L times the Lambert BRDF albedo / pi. */
-  vec3 color = frame.ambient_color * s.albedo;
-  /* Ambient occlusion darkens only this term, as in EEVEE: direct light has its shadows. */
+  /* A uniform World of radiance L: each lobe sends back L times its albedo (the diffuse
+   * colour under the specular layer, and what the specular lobes reflect for this view,
+   * the split-sum of EEVEE with Cycles' tables). */
+  vec3 color = frame.ambient_color * (surface_diffuse_color(s) + surface_specular_color(s));
+  /* Ambient occlusion darkens only this term, as in EEVEE (its horizon scan occludes the
+   * diffuse and the specular World light alike): direct light has its shadows. */
   visibility = frame.ao_enabled != 0 ?
       mix(1.0, ambient_occlusion_at(px, s.view_depth, s.depth_slope), frame.ao_strength) : 1.0;
   return color * visibility;

@@ -163,6 +163,12 @@ def material_info(material):
     specular = _find_input(bsdf, *compat.PRINCIPLED_SPECULAR_INPUTS)
     info.specular_level = float(specular.default_value) \
         if specular is not None and not specular.is_linked else 0.5
+    # Principled v2 (Specular IOR Level) reflects by its IOR; v1's IOR is for transmission
+    # only and its Specular 0.5 is 4% reflectance, which IOR 1.5 gives.
+    ior = _find_input(bsdf, "IOR")
+    if specular is not None and specular.name == compat.PRINCIPLED_SPECULAR_INPUTS[0] and \
+            ior is not None and not ior.is_linked:
+        info.ior = max(float(ior.default_value), 1.0)
     _emission(info, _find_input(bsdf, *compat.PRINCIPLED_EMISSION_INPUTS),
               _find_input(bsdf, "Emission Strength"))
     normal = _find_input(bsdf, "Normal")

@@ -328,7 +328,7 @@ def _material(cache, mesh, slot, white, default_material, memo=None):
         block = pack_material({
             "base_color": material.base_color, "emission": material.emission,
             "metallic": material.metallic, "roughness": material.roughness,
-            "specular_level": material.specular_level,
+            "specular_level": material.specular_level, "ior": material.ior,
             "normal_strength": material.normal_strength,
             "alpha_cutoff": material.alpha_cutoff, "alpha_mode": material.alpha_mode,
             "shadow_alpha_mode": shadow_alpha,

@@ -32,6 +32,7 @@ class MaterialInfo:
     metallic: float = 0.0
     roughness: float = 0.5
     specular_level: float = 0.5
+    ior: float = 1.5                             # the specular layer's IOR
     emission: tuple = (0.0, 0.0, 0.0)            # colour x strength, W/m^2/sr
     emission_image: object = None
     normal_image: object = None                  # tangent-space normal map (Non-Color)

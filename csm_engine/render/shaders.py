@@ -25,7 +25,7 @@ import os
 import re
 import sys
 
-from ..core import paths
+from ..core import bsdf_tables, paths
 from ..core.captured_output import CapturedOutput
 from ..core.frame_layout import FRAME_LAYOUT, glsl_defines
 from ..core.material_layout import MATERIAL_LAYOUT
@@ -162,7 +162,8 @@ PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_normal"),
                                                  ("FLOAT_2D", "ao_half")),
                            outputs=(("VEC2", "out_ao_depth"),),
                            defines=(("AO_BLUR", "1"),))
-PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),)
+PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),
+                                     ("FLOAT_2D", "bsdf_lut"))
 
 # One lighting program per Shadow Filter setting (SHADOW_FILTER, see shadow_lookup.glsl): the
 # plain "lighting" is PCF. Each has "_points" and "_spots" twins with the point- and
@@ -336,7 +337,8 @@ def _build(program_name, spec, directory):
         info.uniform_buf(1, MATERIAL_LAYOUT.type_name, "material")
     for slot, (kind, name) in enumerate(spec["outputs"]):
         info.fragment_out(slot, kind, name)
-    defines = [*glsl_defines(), *material_defines(), *spec.get("defines", ())]
+    defines = [*glsl_defines(), *material_defines(), *bsdf_tables.glsl_defines(),
+               *spec.get("defines", ())]
     for name, value in defines:
         info.define(name, value)
     info.vertex_source(vertex)
