@@ -9,6 +9,7 @@
 #include "surface.glsl"
 #include "brdf.glsl"
 #include "lights.glsl"
+#include "world_light.glsl"
 #include "ao_upsample.glsl"
 #include "shadow_lookup.glsl"
 #include "cascade_selection.glsl"
@@ -19,10 +20,13 @@
  * reaching s in `visibility`). */
 vec3 ambient_light(Surface s, ivec2 px, out float visibility)
 {
-  /* A uniform World of radiance L: each lobe sends back L times its albedo (the diffuse
-   * colour under the specular layer, and what the specular lobes reflect for this view,
-   * the split-sum of EEVEE with Cycles' tables). */
-  vec3 color = frame.ambient_color * (surface_diffuse_color(s) + surface_specular_color(s));
+  /* Each lobe sends back the World's light times its albedo (the split sum of EEVEE, with
+   * Cycles' tables): the diffuse colour under the specular layer times the irradiance of
+   * the normal, and what the specular lobes reflect for this view times the World seen
+   * around the reflected direction. A uniform World of radiance L gives L times each. */
+  vec3 color = surface_diffuse_color(s) * world_diffuse_radiance(s.normal) +
+               surface_specular_color(s) *
+               world_specular_radiance(reflect(-s.to_camera, s.normal), s.roughness);
   /* Ambient occlusion darkens only this term, as in EEVEE (its horizon scan occludes the
    * diffuse and the specular World light alike): direct light has its shadows. */
   visibility = frame.ao_enabled != 0 ?

@@ -72,6 +72,9 @@ class FrameSnapshot:
     instances: list = field(default_factory=list)
     mesh_sources: dict = field(default_factory=dict)   # key -> evaluated object
     ambient: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # The World's radiance as spherical harmonics (core/world_light.py), times Ambient
+    # Strength as ``ambient``; None: the uniform ``ambient``.
+    world_sh: np.ndarray = None
     background: np.ndarray = field(default_factory=lambda: np.zeros(3))
     film_transparent: bool = False
     pixel_filter_width: float = 1.5    # Film > Filter Size (pixels): final-render AA spread
