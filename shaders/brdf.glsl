@@ -24,6 +24,10 @@ struct Principled {
   float eta;           /* the IOR that has it (1: no specular layer) */
   float alpha2;        /* GGX alpha^2 = roughness^4 */
   float n_dot_v;
+  float coat_scale;    /* Coat Weight x the coat lobe's compensation (0: no coat) */
+  float coat_alpha2;
+  float coat_eta;
+  float coat_transmission; /* what the coat lets through to the layers below */
 };
 
 /* One table value (core/bsdf_tables.py's layout). */
@@ -87,16 +91,53 @@ float ggx_lambda(float alpha2, float cos_n)
   return 0.5 * (sqrt(1.0 + alpha2 * tan2) - 1.0);
 }
 
+/* GGX's D G / (4 cos(view)): a lobe's eval times cos(light) for a Fresnel of 1. */
+float ggx_lobe(float alpha2, float n_dot_h, float n_dot_v, float n_dot_l)
+{
+  float t = 1.0 + (alpha2 - 1.0) * n_dot_h * n_dot_h;
+  float d = alpha2 / (PI * t * t);
+  float g = 1.0 / (1.0 + ggx_lambda(alpha2, n_dot_v) + ggx_lambda(alpha2, n_dot_l));
+  return d * g / (4.0 * n_dot_v);
+}
+
 /* Kulla-Conty's multiple-scattering Fresnel (Fms, with one Fss cancelled as Cycles does). */
 vec3 multiscatter_fresnel(vec3 fss, float e_avg)
 {
   return fss * e_avg / (1.0 - fss * (1.0 - e_avg));
 }
 
+/* The table's share of the way from F0 to 1 of a dielectric of IOR eta, for roughness r
+ * and view cosine mu (Cycles' ggx_gen_schlick_ior_s). */
+float dielectric_albedo_share(float r, float mu, float eta)
+{
+  float z = sqrt(abs((eta - 1.0) / (eta + 1.0)));
+  float slice = clamp(z, 0.0, 1.0) * float(BSDF_LUT_S_SIZE - 1);
+  int k = min(int(slice), BSDF_LUT_S_SIZE - 1);
+  int k1 = min(k + 1, BSDF_LUT_S_SIZE - 1);
+  return mix(lut_table(BSDF_LUT_S_IOR_ROW, k * BSDF_LUT_S_SIZE, BSDF_LUT_S_SIZE, r, mu),
+             lut_table(BSDF_LUT_S_IOR_ROW, k1 * BSDF_LUT_S_SIZE, BSDF_LUT_S_SIZE, r, mu),
+             slice - float(k));
+}
+
+/* A dielectric lobe's multiple-scattering Fresnel for roughness r (Cycles:
+ * microfacet_ggx_preserve_energy with Kulla-Conty's fit of the real Fresnel's average):
+ * x = the eval's factor 1 + Fms (1 - E) / E, y = the albedo's factor E + Fms (1 - E). */
+vec2 dielectric_compensation(float r, float mu, float f0, float eta)
+{
+  float e = lut_table(BSDF_LUT_E_ROW, 0, BSDF_LUT_E_SIZE, r, mu);
+  float e_avg = lut_row(BSDF_LUT_E_AVG_ROW, 0, BSDF_LUT_E_SIZE, r);
+  float real_f0 = f0_from_ior(eta);
+  float real_fss = (eta - 1.0) / (4.08567 + 1.00071 * eta);
+  float fss = mix(f0, 1.0, clamp((real_fss - real_f0) / (1.0 - real_f0), 0.0, 1.0));
+  float fms = multiscatter_fresnel(vec3(fss), e_avg).x;
+  return vec2(1.0 + fms * (1.0 - e) / max(e, 1e-6), e + fms * (1.0 - e));
+}
+
 /* The view-dependent part of the BSDF at a surface of normal n seen from direction v:
- * base colour, Metallic, specular (F0 / 0.08, Specular IOR Level applied) and Roughness. */
+ * base colour, Metallic, specular (F0 / 0.08, Specular IOR Level applied), Roughness and
+ * the Coat (weight, roughness, IOR). */
 Principled principled_setup(vec3 base, float metallic, float specular, float roughness,
-                            vec3 n, vec3 v)
+                            vec3 coat, vec3 n, vec3 v)
 {
   Principled p;
   float r = clamp(roughness, 0.0, 1.0);
@@ -105,6 +146,27 @@ Principled principled_setup(vec3 base, float metallic, float specular, float rou
   float m = clamp(metallic, 0.0, 1.0);
   p.alpha2 = alpha * alpha;
   p.n_dot_v = dot(n, v);
+
+  /* Coat: a dielectric GGX layer on top; what it reflects is taken from every layer
+   * below (and from the emission). */
+  float above = 1.0;
+  p.coat_scale = 0.0;
+  p.coat_alpha2 = 0.0;
+  p.coat_eta = max(coat.z, 1.0);
+  p.specular_color = vec3(0.0);
+  if (coat.x > 0.0 && p.coat_eta != 1.0) {
+    float coat_r = clamp(coat.y, 0.0, 1.0);
+    float coat_f0 = f0_from_ior(p.coat_eta);
+    vec2 compensation = dielectric_compensation(coat_r, mu, coat_f0, p.coat_eta);
+    p.coat_scale = coat.x * compensation.x;
+    p.coat_alpha2 = coat_r * coat_r * coat_r * coat_r;
+    float albedo = compensation.y *
+                   mix(coat_f0, 1.0, dielectric_albedo_share(coat_r, mu, p.coat_eta));
+    p.specular_color = vec3(coat.x * albedo);
+    above = clamp(1.0 - coat.x * albedo, 0.0, 1.0);
+  }
+  p.coat_transmission = above;
+
   float e = lut_table(BSDF_LUT_E_ROW, 0, BSDF_LUT_E_SIZE, r, mu);
   float e_avg = lut_row(BSDF_LUT_E_AVG_ROW, 0, BSDF_LUT_E_SIZE, r);
   float missing = (1.0 - e) / max(e, 1e-6);
@@ -114,33 +176,22 @@ Principled principled_setup(vec3 base, float metallic, float specular, float rou
   p.metal_f0 = clamp(base, 0.0, 1.0);
   vec3 metal_fss = mix(p.metal_f0, vec3(1.0), 1.0 / 21.0);
   vec3 metal_fms = multiscatter_fresnel(metal_fss, e_avg);
-  p.metal_scale = m * (1.0 + metal_fms * missing);
+  p.metal_scale = above * m * (1.0 + metal_fms * missing);
   float s5 = lut_table(BSDF_LUT_S5_ROW, 0, BSDF_LUT_S_SIZE, r, mu);
-  p.specular_color = m * (e + metal_fms * (1.0 - e)) * mix(p.metal_f0, vec3(1.0), s5);
+  p.specular_color += above * m * (e + metal_fms * (1.0 - e)) *
+                      mix(p.metal_f0, vec3(1.0), s5);
 
-  /* Dielectric specular layer over the diffuse (weight 1 - Metallic). */
-  float weight = 1.0 - m;
+  /* Dielectric specular layer over the diffuse (weight 1 - Metallic, under the coat). */
+  float weight = above * (1.0 - m);
   p.f0 = min(F0_PER_SPECULAR_LEVEL * max(specular, 0.0), 0.99);
   p.eta = p.f0 > 0.0 ? ior_from_f0(p.f0) : 1.0;
   float layer = 1.0;
   p.specular_scale = 0.0;
   if (p.eta != 1.0) {
-    float real_f0 = f0_from_ior(p.eta);
-    /* Kulla-Conty's fit of the real Fresnel's hemispherical average (as Cycles). */
-    float real_fss = (p.eta - 1.0) / (4.08567 + 1.00071 * p.eta);
-    float fss = mix(p.f0, 1.0, clamp((real_fss - real_f0) / (1.0 - real_f0), 0.0, 1.0));
-    float fms = multiscatter_fresnel(vec3(fss), e_avg).x;
-    p.specular_scale = weight * (1.0 + fms * missing);
+    vec2 compensation = dielectric_compensation(r, mu, p.f0, p.eta);
+    p.specular_scale = weight * compensation.x;
     /* The layer's albedo for this view: the table's share of the way from F0 to 1. */
-    float z = sqrt(abs((p.eta - 1.0) / (p.eta + 1.0)));
-    float slice = clamp(z, 0.0, 1.0) * float(BSDF_LUT_S_SIZE - 1);
-    int k = min(int(slice), BSDF_LUT_S_SIZE - 1);
-    int k1 = min(k + 1, BSDF_LUT_S_SIZE - 1);
-    float s_ior = mix(
-        lut_table(BSDF_LUT_S_IOR_ROW, k * BSDF_LUT_S_SIZE, BSDF_LUT_S_SIZE, r, mu),
-        lut_table(BSDF_LUT_S_IOR_ROW, k1 * BSDF_LUT_S_SIZE, BSDF_LUT_S_SIZE, r, mu),
-        slice - float(k));
-    float albedo = (e + fms * (1.0 - e)) * mix(p.f0, 1.0, s_ior);
+    float albedo = compensation.y * mix(p.f0, 1.0, dielectric_albedo_share(r, mu, p.eta));
     p.specular_color += weight * albedo;
     layer = clamp(1.0 - albedo, 0.0, 1.0);
   }
@@ -158,16 +209,13 @@ void principled_eval(Principled p, vec3 n, vec3 v, vec3 l, out vec3 diffuse,
   specular = vec3(0.0);
   /* Cycles evaluates no lobe for a view below the surface, nor a near-mirror lobe
    * (alpha^2 <= 1e-7) for a point light: its highlight is a delta. */
-  if (n_dot_l <= 0.0 || p.n_dot_v <= 0.0 || p.alpha2 <= 1e-7) {
+  if (n_dot_l <= 0.0 || p.n_dot_v <= 0.0) {
     return;
   }
   vec3 h = normalize(l + v);
   float n_dot_h = dot(n, h);
   float h_dot_v = clamp(dot(h, v), 0.0, 1.0);
-  float t = 1.0 + (p.alpha2 - 1.0) * n_dot_h * n_dot_h;
-  float d = p.alpha2 / (PI * t * t);
-  float g = 1.0 / (1.0 + ggx_lambda(p.alpha2, p.n_dot_v) + ggx_lambda(p.alpha2, n_dot_l));
-  float lobe = d * g / (4.0 * p.n_dot_v);
+  float lobe = p.alpha2 > 1e-7 ? ggx_lobe(p.alpha2, n_dot_h, p.n_dot_v, n_dot_l) : 0.0;
   float x = 1.0 - h_dot_v;
   float x2 = x * x;
   vec3 metal_f = mix(p.metal_f0, vec3(1.0), x2 * x2 * x);
@@ -179,4 +227,8 @@ void principled_eval(Principled p, vec3 n, vec3 v, vec3 l, out vec3 diffuse,
     dielectric_f = mix(p.f0, 1.0, s);
   }
   specular = lobe * (p.metal_scale * metal_f + p.specular_scale * dielectric_f);
+  if (p.coat_scale > 0.0 && p.coat_alpha2 > 1e-7) {
+    specular += vec3(p.coat_scale * fresnel_dielectric(h_dot_v, p.coat_eta) *
+                     ggx_lobe(p.coat_alpha2, n_dot_h, p.n_dot_v, n_dot_l));
+  }
 }

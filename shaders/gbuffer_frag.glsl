@@ -6,7 +6,8 @@
  * out_depth    = view depth along the camera's forward axis (0 = background)
  * out_facet    = the triangle's own normal xyz (on the shading normal's side), the
  *                object's Shadow Terminator Geometry Offset
- * out_emission = emitted radiance rgb (W/m^2/sr, EEVEE's units), metallic */
+ * out_emission = emitted radiance rgb (W/m^2/sr, EEVEE's units), metallic
+ * out_coat     = Principled Coat weight, roughness, IOR */
 
 #include "alpha_hash.glsl"
 
@@ -98,6 +99,7 @@ void main()
   out_normal = vec4(n, clamp(roughness, 0.0, 1.0));
   out_depth = max(view_depth, 1e-6);
   out_emission = vec4(emission, clamp(metallic, 0.0, 1.0));
+  out_coat = vec4(material.coat_weight, material.coat_roughness, material.coat_ior, 0.0);
   /* The triangle's own plane: every pixel of a quad (helpers too) interpolates this
    * triangle, so the derivatives are exactly its edges. Turned to the side the shading
    * normal is on. */

@@ -17,7 +17,8 @@ struct Surface {
   float specular;          /* dielectric F0 / 0.08: Specular IOR Level at IOR 1.5 */
   float roughness;         /* Principled Roughness */
   float metallic;
-  vec3 emission;           /* emitted radiance, W/m^2/sr */
+  vec3 coat;               /* Principled Coat weight, roughness, IOR */
+  vec3 emission;           /* emitted radiance, W/m^2/sr (under the coat) */
   vec3 to_camera;          /* unit direction to the eye */
   Principled bsdf;         /* the BSDF's view-dependent part (principled_setup) */
 };
@@ -68,10 +69,13 @@ Surface gbuffer_surface(ivec2 px, vec2 uv, float depth)
   s.roughness = normal_shine.w;
   s.metallic = emission_metallic.a;
   s.emission = emission_metallic.rgb;
+  s.coat = texelFetch(gbuffer_coat, px, 0).xyz;
   s.to_camera = frame.is_perspective != 0 ? normalize(frame.camera_position - s.position) :
                                             -frame.camera_forward;
-  s.bsdf = principled_setup(s.albedo, s.metallic, s.specular, s.roughness, s.normal,
+  s.bsdf = principled_setup(s.albedo, s.metallic, s.specular, s.roughness, s.coat, s.normal,
                             s.to_camera);
+  /* Cycles' emission lies under the coat: what the coat reflects does not come through. */
+  s.emission *= s.bsdf.coat_transmission;
   return s;
 }
 

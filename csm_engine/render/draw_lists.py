@@ -130,8 +130,8 @@ class CasterSignature(NamedTuple):
 
 
 def _writes_emission(items):
-    """Whether any camera draw of ``items`` has emission or metallic, i.e. needs the
-    G-buffer's emission target. Instances of one mesh share their ``MeshDraws``, so each is
+    """Whether any camera draw of ``items`` has emission, metallic or a coat, i.e. needs
+    the G-buffer's emission and coat targets. Instances of one mesh share their ``MeshDraws``, so each is
     looked at once."""
     seen = set()
     for entry in items:
@@ -329,6 +329,8 @@ def _material(cache, mesh, slot, white, default_material, memo=None):
             "base_color": material.base_color, "emission": material.emission,
             "metallic": material.metallic, "roughness": material.roughness,
             "specular_level": material.specular_level, "ior": material.ior,
+            "coat_weight": material.coat_weight, "coat_roughness": material.coat_roughness,
+            "coat_ior": material.coat_ior,
             "normal_strength": material.normal_strength,
             "alpha_cutoff": material.alpha_cutoff, "alpha_mode": material.alpha_mode,
             "shadow_alpha_mode": shadow_alpha,
@@ -347,7 +349,7 @@ def _material(cache, mesh, slot, white, default_material, memo=None):
     if held[2] != 'OPAQUE' and loaded[0]:
         shadow_key = None
     writes_emission = bool(loaded[2] or max(material.emission) > 0.0 or
-                           material.metallic > 0.0 or
+                           material.metallic > 0.0 or material.coat_weight > 0.0 or
                            (loaded[3] and material.metallic_channel >= 0))
     # What a G-buffer drawn with this material depends on; None when it reads an
     # image (painted or reloaded in place, it keeps its name and texture).

@@ -1,8 +1,8 @@
 """The G-buffer pass: what the camera sees, per pixel, for the lighting pass to shade.
 
-Owns the G-buffer's targets (``GBuffer``): albedo+specular, normal+shininess, view depth
+Owns the G-buffer's targets (``GBuffer``): albedo+specular, normal+roughness, view depth
 (0 = background), the triangle's own normal+the object's Shadow Terminator Geometry Offset
-(facet), emission+metallic, and depth; materials are one uniform block each
+(facet), emission+metallic, the coat (weight, roughness, IOR), and depth; materials are one uniform block each
 (core/material_layout.py). World positions are rebuilt from view depth where needed
 (``core.camera.world_positions``). Also owns ``GBufferContents``: what a G-buffer drawn now
 would hold, so that one the targets already hold is not drawn again (F12 after a shadow or
@@ -32,6 +32,7 @@ class GBuffer(NamedTuple):
     facet: object
     depth: object
     framebuffer: object
+    coat: object = None
 
 
 class GBufferContents(NamedTuple):
@@ -67,22 +68,24 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     depth = targets.gbuffer_depth(width, height)
     emission = targets.texture("emission", (width, height), 'RGBA16F')
     facet = targets.texture("facet", (width, height), 'RGBA16F')
-    # Emission and metallic have a target only in frames that draw some: without it each
-    # fragment writes a sixth less (llvmpipe: ~15 % of the G-buffer), and the lighting pass
-    # reads an emission texture kept at zero.
+    coat = targets.texture("coat", (width, height), 'RGBA16F')
+    # Emission and metallic, and the coat, have targets only in frames that draw some:
+    # without them each fragment writes a third less (llvmpipe: ~15 % of the G-buffer each),
+    # and the lighting pass reads textures kept at zero.
     if lists.writes_emission:
         gbuffer_fb = targets.framebuffer("gbuffer", depth=depth,
-                                         colors=(albedo, normal, view_depth, facet, emission))
+                                         colors=(albedo, normal, view_depth, facet, emission,
+                                                 coat))
         targets.zeroed_emission = None
     else:
         gbuffer_fb = targets.framebuffer("gbuffer_no_emission", depth=depth,
                                          colors=(albedo, normal, view_depth, facet))
         if targets.zeroed_emission is not emission:
-            emission_fb = targets.framebuffer("emission_only", colors=(emission,))
+            emission_fb = targets.framebuffer("emission_only", colors=(emission, coat))
             with emission_fb.bind():
                 targets.call(emission_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
             targets.zeroed_emission = emission
-    gbuffer = GBuffer(albedo, normal, view_depth, emission, facet, depth, gbuffer_fb)
+    gbuffer = GBuffer(albedo, normal, view_depth, emission, facet, depth, gbuffer_fb, coat)
     # Near to far, so the early depth test skips the shading of hidden fragments.
     order = np.asarray(front_to_back(snap, instances.bounds_lo_hi), dtype=np.int64)
     order = order[np.fromiter((i.visible_camera for i in snap.instances), dtype=bool,
@@ -90,7 +93,7 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     terminator_offsets = np.fromiter((i.terminator_offset for i in snap.instances),
                                      dtype=np.float64, count=len(snap.instances))
     frame_cache = targets.frame_cache
-    drawn_into = (albedo, normal, view_depth, emission, depth, facet)
+    drawn_into = (albedo, normal, view_depth, emission, depth, facet, coat)
     contents = gbuffer_contents(targets, snap, cache, lists, order,
                                 instances.world_from_objects, terminator_offsets, frame_data)
     held = frame_cache.gbuffer

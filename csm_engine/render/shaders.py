@@ -55,7 +55,7 @@ PROGRAMS = {
         frame=True,
         material=True,      # MaterialData (core/material_layout.py) as "material"
         outputs=(("VEC4", "out_albedo"), ("VEC4", "out_normal"), ("FLOAT", "out_depth"),
-                 ("VEC4", "out_facet"), ("VEC4", "out_emission")),
+                 ("VEC4", "out_facet"), ("VEC4", "out_emission"), ("VEC4", "out_coat")),
     ),
     "shadow": dict(
         vertex="shadow_vert.glsl", fragment="shadow_frag.glsl",
@@ -163,7 +163,7 @@ PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_normal"),
                            outputs=(("VEC2", "out_ao_depth"),),
                            defines=(("AO_BLUR", "1"),))
 PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),
-                                     ("FLOAT_2D", "bsdf_lut"))
+                                     ("FLOAT_2D", "bsdf_lut"), ("FLOAT_2D", "gbuffer_coat"))
 
 # One lighting program per Shadow Filter setting (SHADOW_FILTER, see shadow_lookup.glsl): the
 # plain "lighting" is PCF. Each has "_points" and "_spots" twins with the point- and

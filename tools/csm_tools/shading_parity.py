@@ -173,6 +173,11 @@ def build_scene(name):
                            "Emission Strength": 2.0}),
             _principled("ior 2", (0.2, 0.2, 0.2), 0.2, IOR=2.0),
         )
+        # The emissive sphere is no light in Cycles (Emission Sampling None): with two
+        # lights Cycles' one sample picks one at random, and the sun's light is noise.
+        emissive = materials[4]
+        if hasattr(emissive, "cycles") and hasattr(emissive.cycles, "emission_sampling"):
+            emissive.cycles.emission_sampling = 'NONE'
         for i, material in enumerate(materials):
             _sphere((2.2 * (i % 3) - 2.2, 2.4 * (i // 3), 0.9), 0.9, material)
         _sun((0.3, -0.4, 0.8))
