@@ -28,6 +28,8 @@ struct Principled {
   float coat_alpha2;
   float coat_eta;
   float coat_transmission; /* what the coat lets through to the layers below */
+  bool v1;             /* Principled v1 (Blender < 4.0): Burley diffuse, no layering */
+  float roughness;
 };
 
 /* One table value (core/bsdf_tables.py's layout). */
@@ -133,11 +135,63 @@ vec2 dielectric_compensation(float r, float mu, float f0, float eta)
   return vec2(1.0 + fms * (1.0 - e) / max(e, 1e-6), e + fms * (1.0 - e));
 }
 
+/* Principled v1 as Blender 3.x's Cycles sets it up (single-scattering GGX, its default
+ * distribution): a Burley diffuse of base colour x (1 - Metallic), not darkened by the
+ * specular lobe, and one GGX lobe whose Fresnel runs from
+ * cspec0 = mix(0.08 x Specular, base colour, Metallic) to 1 as the real Fresnel of the IOR
+ * of 0.08 x Specular does (interpolate_fresnel_color). */
+Principled principled_v1_setup(Principled p, vec3 base, float m, float specular, float r,
+                               float mu)
+{
+  p.f0 = min(F0_PER_SPECULAR_LEVEL * max(specular, 0.0), 0.99);
+  p.eta = ior_from_f0(p.f0);
+  p.metal_f0 = mix(vec3(p.f0), clamp(base, 0.0, 1.0), m);
+  p.metal_scale = vec3(1.0);
+  p.specular_scale = 0.0;
+  p.coat_scale = 0.0;
+  p.coat_alpha2 = 0.0;
+  p.coat_eta = 1.0;
+  p.coat_transmission = 1.0;
+  p.diffuse_color = max(base, 0.0) * (1.0 - m);
+  /* What the lobe reflects of a uniform World: its albedo with this Fresnel. */
+  float e = lut_table(BSDF_LUT_E_ROW, 0, BSDF_LUT_E_SIZE, r, mu);
+  float s = p.eta != 1.0 ? dielectric_albedo_share(r, mu, p.eta) : 0.0;
+  p.specular_color = e * mix(p.metal_f0, vec3(1.0), s);
+  return p;
+}
+
+/* Principled v1's response (Cycles 3.x: bsdf_principled_diffuse's full Burley diffuse with
+ * retro-reflection, and GGX with the separable Smith term). */
+void principled_v1_eval(Principled p, vec3 n, vec3 v, vec3 l, float n_dot_l,
+                        out vec3 diffuse, out vec3 specular)
+{
+  float fl = pow(1.0 - n_dot_l, 5.0);
+  float fv = pow(1.0 - clamp(p.n_dot_v, 0.0, 1.0), 5.0);
+  float rr = p.roughness * (dot(l, v) + 1.0);
+  float f = (1.0 - 0.5 * fv) * (1.0 - 0.5 * fl) + rr * (fl + fv + fl * fv * (rr - 1.0));
+  diffuse = p.diffuse_color * (f * n_dot_l / PI);
+  specular = vec3(0.0);
+  if (p.n_dot_v <= 0.0 || p.alpha2 <= 1e-7) {
+    return;
+  }
+  vec3 h = normalize(l + v);
+  float n_dot_h = dot(n, h);
+  float t = 1.0 + (p.alpha2 - 1.0) * n_dot_h * n_dot_h;
+  float d = p.alpha2 / (PI * t * t);
+  float g = 1.0 / ((1.0 + ggx_lambda(p.alpha2, p.n_dot_v)) *
+                   (1.0 + ggx_lambda(p.alpha2, n_dot_l)));
+  float real_f0 = f0_from_ior(p.eta);
+  float share = p.eta != 1.0 ?
+      (fresnel_dielectric(clamp(dot(h, v), 0.0, 1.0), p.eta) - real_f0) / (1.0 - real_f0) :
+      0.0;
+  specular = mix(p.metal_f0, vec3(1.0), share) * (d * g / (4.0 * p.n_dot_v));
+}
+
 /* The view-dependent part of the BSDF at a surface of normal n seen from direction v:
  * base colour, Metallic, specular (F0 / 0.08, Specular IOR Level applied), Roughness and
- * the Coat (weight, roughness, IOR). */
+ * the Coat (weight, roughness, IOR); v1: Blender < 4.0's model instead. */
 Principled principled_setup(vec3 base, float metallic, float specular, float roughness,
-                            vec3 coat, vec3 n, vec3 v)
+                            vec3 coat, vec3 n, vec3 v, bool v1)
 {
   Principled p;
   float r = clamp(roughness, 0.0, 1.0);
@@ -146,6 +200,11 @@ Principled principled_setup(vec3 base, float metallic, float specular, float rou
   float m = clamp(metallic, 0.0, 1.0);
   p.alpha2 = alpha * alpha;
   p.n_dot_v = dot(n, v);
+  p.v1 = v1;
+  p.roughness = r;
+  if (v1) {
+    return principled_v1_setup(p, base, m, specular, r, mu);
+  }
 
   /* Coat: a dielectric GGX layer on top; what it reflects is taken from every layer
    * below (and from the emission). */
@@ -209,7 +268,14 @@ void principled_eval(Principled p, vec3 n, vec3 v, vec3 l, out vec3 diffuse,
   specular = vec3(0.0);
   /* Cycles evaluates no lobe for a view below the surface, nor a near-mirror lobe
    * (alpha^2 <= 1e-7) for a point light: its highlight is a delta. */
-  if (n_dot_l <= 0.0 || p.n_dot_v <= 0.0) {
+  if (n_dot_l <= 0.0) {
+    return;
+  }
+  if (p.v1) {
+    principled_v1_eval(p, n, v, l, n_dot_l, diffuse, specular);
+    return;
+  }
+  if (p.n_dot_v <= 0.0) {
     return;
   }
   vec3 h = normalize(l + v);

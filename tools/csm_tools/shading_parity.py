@@ -68,7 +68,10 @@ def _principled(name, base=(0.8, 0.8, 0.8), roughness=0.5, **inputs):
     for names, value in inputs.items():
         socket = next((bsdf.inputs[n] for n in names.split("|") if bsdf.inputs.get(n)), None)
         if socket is not None:
-            socket.default_value = value
+            try:
+                socket.default_value = value
+            except TypeError:
+                pass        # 3.4's Specular Tint is a factor, not a colour: left as it is
     return material
 
 
@@ -178,6 +181,8 @@ def build_scene(name):
         emissive = materials[4]
         if hasattr(emissive, "cycles") and hasattr(emissive.cycles, "emission_sampling"):
             emissive.cycles.emission_sampling = 'NONE'
+        elif hasattr(emissive, "cycles") and hasattr(emissive.cycles, "sample_as_light"):
+            emissive.cycles.sample_as_light = False          # 3.x
         for i, material in enumerate(materials):
             _sphere((2.2 * (i % 3) - 2.2, 2.4 * (i // 3), 0.9), 0.9, material)
         _sun((0.3, -0.4, 0.8))
