@@ -28,7 +28,6 @@ struct Principled {
   float coat_alpha2;
   float coat_eta;
   float coat_transmission; /* what the coat lets through to the layers below */
-  bool v1;             /* Principled v1 (Blender < 4.0): Burley diffuse, no layering */
   float roughness;
 };
 
@@ -189,9 +188,9 @@ void principled_v1_eval(Principled p, vec3 n, vec3 v, vec3 l, float n_dot_l,
 
 /* The view-dependent part of the BSDF at a surface of normal n seen from direction v:
  * base colour, Metallic, specular (F0 / 0.08, Specular IOR Level applied), Roughness and
- * the Coat (weight, roughness, IOR); v1: Blender < 4.0's model instead. */
+ * the Coat (weight, roughness, IOR); with PRINCIPLED_V1 (Blender < 4.0), v1's model. */
 Principled principled_setup(vec3 base, float metallic, float specular, float roughness,
-                            vec3 coat, vec3 n, vec3 v, bool v1)
+                            vec3 coat, vec3 n, vec3 v)
 {
   Principled p;
   float r = clamp(roughness, 0.0, 1.0);
@@ -200,11 +199,10 @@ Principled principled_setup(vec3 base, float metallic, float specular, float rou
   float m = clamp(metallic, 0.0, 1.0);
   p.alpha2 = alpha * alpha;
   p.n_dot_v = dot(n, v);
-  p.v1 = v1;
   p.roughness = r;
-  if (v1) {
-    return principled_v1_setup(p, base, m, specular, r, mu);
-  }
+#ifdef PRINCIPLED_V1
+  return principled_v1_setup(p, base, m, specular, r, mu);
+#endif
 
   /* Coat: a dielectric GGX layer on top; what it reflects is taken from every layer
    * below (and from the emission). */
@@ -271,10 +269,10 @@ void principled_eval(Principled p, vec3 n, vec3 v, vec3 l, out vec3 diffuse,
   if (n_dot_l <= 0.0) {
     return;
   }
-  if (p.v1) {
-    principled_v1_eval(p, n, v, l, n_dot_l, diffuse, specular);
-    return;
-  }
+#ifdef PRINCIPLED_V1
+  principled_v1_eval(p, n, v, l, n_dot_l, diffuse, specular);
+  return;
+#endif
   if (p.n_dot_v <= 0.0) {
     return;
   }

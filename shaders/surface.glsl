@@ -73,7 +73,7 @@ Surface gbuffer_surface(ivec2 px, vec2 uv, float depth)
   s.to_camera = frame.is_perspective != 0 ? normalize(frame.camera_position - s.position) :
                                             -frame.camera_forward;
   s.bsdf = principled_setup(s.albedo, s.metallic, s.specular, s.roughness, s.coat, s.normal,
-                            s.to_camera, frame.principled_v1 != 0);
+                            s.to_camera);
   /* Cycles' emission lies under the coat: what the coat reflects does not come through. */
   s.emission *= s.bsdf.coat_transmission;
   return s;

@@ -25,7 +25,8 @@ PRINCIPLED_SPECULAR_INPUTS = ("Specular IOR Level", "Specular")
 # Principled BSDF emission colour: "Emission Color" in 4.0+, "Emission" before.
 PRINCIPLED_EMISSION_INPUTS = ("Emission Color", "Emission")
 # The Principled BSDF model this Blender's Cycles evaluates: v1 (Disney-style, Burley
-# diffuse, no layering) before 4.0, v2 from 4.0 (brdf.glsl evaluates both).
+# diffuse, no layering) before 4.0, v2 from 4.0 (brdf.glsl evaluates both; the shaders
+# get PRINCIPLED_V1 defined on a v1 host).
 PRINCIPLED_V1 = bpy.app.version < (4, 0, 0)
 # Separate RGB (3.4 .. 4.x, outputs R/G/B) and Separate Color (3.3+, Red/Green/Blue).
 SEPARATE_NODE_TYPES = frozenset({'SEPARATE_COLOR', 'SEPRGB'})

@@ -293,7 +293,6 @@ def take(depsgraph, camera, is_viewport=False):
     if world_sh is not None:
         snap.world_sh = world_sh * snap.settings.ambient_strength
     snap.background = world_color
-    snap.principled_v1 = compat.PRINCIPLED_V1
 
     matrices = []
     suns = []

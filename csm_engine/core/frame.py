@@ -75,7 +75,6 @@ class FrameSnapshot:
     # The World's radiance as spherical harmonics (core/world_light.py), times Ambient
     # Strength as ``ambient``; None: the uniform ``ambient``.
     world_sh: np.ndarray = None
-    principled_v1: bool = False     # Blender < 4.0: Principled v1 as that Cycles shades it
     background: np.ndarray = field(default_factory=lambda: np.zeros(3))
     film_transparent: bool = False
     pixel_filter_width: float = 1.5    # Film > Filter Size (pixels): final-render AA spread

@@ -211,7 +211,6 @@ def _snapshot_fields(snap):
         viewport_size=(camera.width, camera.height),
         ambient_color=snap.ambient,
         world_sh=_world_sh(snap),
-        principled_v1=int(snap.principled_v1),
         background_alpha=0.0 if snap.film_transparent else 1.0,
         background_color=snap.background,
         sun_direction=sun.to_light if sun is not None else (0.0, 0.0, 0.0),

@@ -400,7 +400,6 @@ FRAME_LAYOUT = UniformLayout("FrameData", (
     ("viewport_size", "vec2", "width and height of the render (pixels)"),
     ("ambient_color", "vec3", "uniform World radiance lighting every surface (linear rgb, "
                               "W/m^2/sr)"),
-    ("principled_v1", "int", "1: the Principled BSDF of Blender < 4.0 (v1), 0: v2"),
     ("world_sh", "vec4", 9, "the World's radiance lighting every surface as spherical "
                             "harmonics up to band 2 (rgb, W/m^2/sr; core/world_light.py)"),
     ("background_alpha", "float", "alpha of background pixels: 0 with Film > Transparent"),

@@ -308,7 +308,7 @@ def _error_lines(log):
     return errors
 
 
-def _build(program_name, spec, directory):
+def _build(program_name, spec, directory, host_defines=()):
     import gpu
 
     file_ids = {}
@@ -338,7 +338,7 @@ def _build(program_name, spec, directory):
     for slot, (kind, name) in enumerate(spec["outputs"]):
         info.fragment_out(slot, kind, name)
     defines = [*glsl_defines(), *material_defines(), *bsdf_tables.glsl_defines(),
-               *spec.get("defines", ())]
+               *host_defines, *spec.get("defines", ())]
     for name, value in defines:
         info.define(name, value)
     info.vertex_source(vertex)
@@ -402,6 +402,10 @@ class ShaderLibrary:
     def __init__(self, directory=None, preferred_folder=None):
         self.directory = directory
         self.preferred_folder = preferred_folder
+        # ``#define``s of the host Blender, set by the Blender side (PRINCIPLED_V1: the
+        # Principled BSDF of Blender < 4.0); a compile-time switch, because llvmpipe runs
+        # both sides of an `if` on a uniform.
+        self.host_defines = ()
         self._shaders = None
         self.last_error = None
         self.generation = 0
@@ -445,7 +449,7 @@ class ShaderLibrary:
         compiled = {}
         try:
             for name, spec in PROGRAMS.items():
-                compiled[name] = _build(name, spec, directory)
+                compiled[name] = _build(name, spec, directory, self.host_defines)
         except BaseException:
             _RETIRED.append(compiled)      # the programs that did compile, freed later
             raise

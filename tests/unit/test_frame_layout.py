@@ -246,7 +246,6 @@ def _snapshot_and_plan():
                 casts_shadow=True),
         points=[PointLight(np.array([1.0, 1.0, 1.0]), np.array([0.5, 0.25, 0.125]), 10.0)],
         spots=[spot, spot], ambient=np.array([0.1, 0.2, 0.3]), world_sh=None,
-        principled_v1=False,
         background=np.array([0.4, 0.5, 0.6]), film_transparent=True, sample_index=0)
     tiles = [ShadowTile(rng.normal(size=(4, 4)), 1024 >> i, 0.01 * (i + 1), 1.0 + i, 50.0 + i,
                         False, origin=(1024 * i, 0), display_near=2.0 + i) for i in range(2)]
