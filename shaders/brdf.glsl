@@ -31,31 +31,26 @@ struct Principled {
   float roughness;
 };
 
-/* One table value (core/bsdf_tables.py's layout). */
-float lut_value(int row, int column)
+/* A table of n x n nodes (x along a row, y across rows; core/bsdf_tables.py's layout) at
+ * (x, y) in 0..1, nodes at i / (n - 1), interpolated linearly as Cycles'
+ * lookup_table_read: four texels, every channel at once. */
+vec4 lut_table(int first_row, int first_column, int n, float x, float y)
 {
-  return texelFetch(bsdf_lut, ivec2(column, row), 0).r;
+  vec2 position = clamp(vec2(x, y), 0.0, 1.0) * float(n - 1);
+  ivec2 i = min(ivec2(position), ivec2(n - 1));
+  ivec2 j = min(i + 1, ivec2(n - 1));
+  vec2 t = position - vec2(i);
+  vec4 bottom = mix(texelFetch(bsdf_lut, ivec2(first_column + i.x, first_row + i.y), 0),
+                    texelFetch(bsdf_lut, ivec2(first_column + j.x, first_row + i.y), 0), t.x);
+  vec4 top = mix(texelFetch(bsdf_lut, ivec2(first_column + i.x, first_row + j.y), 0),
+                 texelFetch(bsdf_lut, ivec2(first_column + j.x, first_row + j.y), 0), t.x);
+  return mix(bottom, top, t.y);
 }
 
-/* Linear interpolation along a row of n nodes at x in 0..1 (nodes at i / (n - 1)), as
- * Cycles' lookup_table_read. */
-float lut_row(int row, int first_column, int n, float x)
+/* E (GGX albedo), s_schlick5 and E_avg (x, y, z) for roughness r and view cosine mu. */
+vec3 ggx_albedo_tables(float r, float mu)
 {
-  float position = clamp(x, 0.0, 1.0) * float(n - 1);
-  int i = min(int(position), n - 1);
-  int j = min(i + 1, n - 1);
-  return mix(lut_value(row, first_column + i), lut_value(row, first_column + j),
-             position - float(i));
-}
-
-/* A table of n x n nodes (x along a row, y across rows) at (x, y). */
-float lut_table(int first_row, int first_column, int n, float x, float y)
-{
-  float position = clamp(y, 0.0, 1.0) * float(n - 1);
-  int i = min(int(position), n - 1);
-  int j = min(i + 1, n - 1);
-  return mix(lut_row(first_row + i, first_column, n, x),
-             lut_row(first_row + j, first_column, n, x), position - float(i));
+  return lut_table(BSDF_LUT_E_ROW, 0, BSDF_LUT_E_SIZE, r, mu).xyz;
 }
 
 float f0_from_ior(float eta)
@@ -114,19 +109,17 @@ float dielectric_albedo_share(float r, float mu, float eta)
   float z = sqrt(abs((eta - 1.0) / (eta + 1.0)));
   float slice = clamp(z, 0.0, 1.0) * float(BSDF_LUT_S_SIZE - 1);
   int k = min(int(slice), BSDF_LUT_S_SIZE - 1);
-  int k1 = min(k + 1, BSDF_LUT_S_SIZE - 1);
-  return mix(lut_table(BSDF_LUT_S_IOR_ROW, k * BSDF_LUT_S_SIZE, BSDF_LUT_S_SIZE, r, mu),
-             lut_table(BSDF_LUT_S_IOR_ROW, k1 * BSDF_LUT_S_SIZE, BSDF_LUT_S_SIZE, r, mu),
-             slice - float(k));
+  /* Slice k's texels hold slices k and k + 1. */
+  vec2 slices = lut_table(BSDF_LUT_S_IOR_ROW, k * BSDF_LUT_S_SIZE, BSDF_LUT_S_SIZE, r, mu).xy;
+  return mix(slices.x, slices.y, slice - float(k));
 }
 
 /* A dielectric lobe's multiple-scattering Fresnel for roughness r (Cycles:
  * microfacet_ggx_preserve_energy with Kulla-Conty's fit of the real Fresnel's average):
- * x = the eval's factor 1 + Fms (1 - E) / E, y = the albedo's factor E + Fms (1 - E). */
-vec2 dielectric_compensation(float r, float mu, float f0, float eta)
+ * x = the eval's factor 1 + Fms (1 - E) / E, y = the albedo's factor E + Fms (1 - E);
+ * e, e_avg: E and E_avg of the roughness and view (ggx_albedo_tables). */
+vec2 dielectric_compensation(float e, float e_avg, float f0, float eta)
 {
-  float e = lut_table(BSDF_LUT_E_ROW, 0, BSDF_LUT_E_SIZE, r, mu);
-  float e_avg = lut_row(BSDF_LUT_E_AVG_ROW, 0, BSDF_LUT_E_SIZE, r);
   float real_f0 = f0_from_ior(eta);
   float real_fss = (eta - 1.0) / (4.08567 + 1.00071 * eta);
   float fss = mix(f0, 1.0, clamp((real_fss - real_f0) / (1.0 - real_f0), 0.0, 1.0));
@@ -153,7 +146,7 @@ Principled principled_v1_setup(Principled p, vec3 base, float m, float specular,
   p.coat_transmission = 1.0;
   p.diffuse_color = max(base, 0.0) * (1.0 - m);
   /* What the lobe reflects of a uniform World: its albedo with this Fresnel. */
-  float e = lut_table(BSDF_LUT_E_ROW, 0, BSDF_LUT_E_SIZE, r, mu);
+  float e = ggx_albedo_tables(r, mu).x;
   float s = p.eta != 1.0 ? dielectric_albedo_share(r, mu, p.eta) : 0.0;
   p.specular_color = e * mix(p.metal_f0, vec3(1.0), s);
   return p;
@@ -214,7 +207,9 @@ Principled principled_setup(vec3 base, float metallic, float specular, float rou
   if (coat.x > 0.0 && p.coat_eta != 1.0) {
     float coat_r = clamp(coat.y, 0.0, 1.0);
     float coat_f0 = f0_from_ior(p.coat_eta);
-    vec2 compensation = dielectric_compensation(coat_r, mu, coat_f0, p.coat_eta);
+    vec3 coat_tables = ggx_albedo_tables(coat_r, mu);
+    vec2 compensation = dielectric_compensation(coat_tables.x, coat_tables.z, coat_f0,
+                                                p.coat_eta);
     p.coat_scale = coat.x * compensation.x;
     p.coat_alpha2 = coat_r * coat_r * coat_r * coat_r;
     float albedo = compensation.y *
@@ -224,8 +219,9 @@ Principled principled_setup(vec3 base, float metallic, float specular, float rou
   }
   p.coat_transmission = above;
 
-  float e = lut_table(BSDF_LUT_E_ROW, 0, BSDF_LUT_E_SIZE, r, mu);
-  float e_avg = lut_row(BSDF_LUT_E_AVG_ROW, 0, BSDF_LUT_E_SIZE, r);
+  vec3 tables = ggx_albedo_tables(r, mu);
+  float e = tables.x;
+  float e_avg = tables.z;
   float missing = (1.0 - e) / max(e, 1e-6);
 
   /* Metal: F82-tint with a white tint is Schlick's Fresnel from the base colour; its
@@ -234,9 +230,8 @@ Principled principled_setup(vec3 base, float metallic, float specular, float rou
   vec3 metal_fss = mix(p.metal_f0, vec3(1.0), 1.0 / 21.0);
   vec3 metal_fms = multiscatter_fresnel(metal_fss, e_avg);
   p.metal_scale = above * m * (1.0 + metal_fms * missing);
-  float s5 = lut_table(BSDF_LUT_S5_ROW, 0, BSDF_LUT_S_SIZE, r, mu);
   p.specular_color += above * m * (e + metal_fms * (1.0 - e)) *
-                      mix(p.metal_f0, vec3(1.0), s5);
+                      mix(p.metal_f0, vec3(1.0), tables.y);
 
   /* Dielectric specular layer over the diffuse (weight 1 - Metallic, under the coat). */
   float weight = above * (1.0 - m);
@@ -245,7 +240,7 @@ Principled principled_setup(vec3 base, float metallic, float specular, float rou
   float layer = 1.0;
   p.specular_scale = 0.0;
   if (p.eta != 1.0) {
-    vec2 compensation = dielectric_compensation(r, mu, p.f0, p.eta);
+    vec2 compensation = dielectric_compensation(e, e_avg, p.f0, p.eta);
     p.specular_scale = weight * compensation.x;
     /* The layer's albedo for this view: the table's share of the way from F0 to 1. */
     float albedo = compensation.y * mix(p.f0, 1.0, dielectric_albedo_share(r, mu, p.eta));

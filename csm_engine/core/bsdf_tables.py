@@ -12,30 +12,31 @@ shipped, and their packing into one float texture (``lut_texture_rows``):
   (``ggx_gen_schlick_ior_s``, 16^3): the specular layer's albedo, taken out of the
   diffuse layer beneath it;
 - ``s_schlick5(roughness, cos)``: the same for Schlick's (1 - cos)^5
-  (``ggx_gen_schlick_s`` at exponent 5): a metal's albedo.
+  (``ggx_gen_schlick_s`` at exponent 5): a metal's albedo; on E's 32 x 32 grid (Cycles
+  keeps it on 16 x 16), so that one texel holds E, E_avg and it.
 
 Table axes run over [0, 1] with nodes at i / (n - 1), read with linear interpolation as
 Cycles' ``lookup_table_read`` does; roughness is Principled Roughness (alpha = r^2), cos
 the cosine between the shading normal and the view. Pure and memoized (``ValueMemo``):
-the tables are computed once per process (~0.3 s). numpy only.
+the tables are computed once per process (~0.5 s). numpy only.
 """
 
 import numpy as np
 
 from .memo import ValueMemo
 
-E_SIZE = 32          # E: roughness x cos
-S_SIZE = 16          # s_ior: roughness x cos x z; s_schlick5: roughness x cos
+E_SIZE = 32          # E, E_avg, s_schlick5: roughness x cos
+S_SIZE = 16          # s_ior: roughness x cos x z
 QUADRATURE = 48      # visible-normal samples per axis (midpoints of a regular grid)
-# Where each table sits in the texture (rows of LUT_WIDTH floats): s_ior first, its z
-# slices side by side (column z * S_SIZE + roughness, row cos), then E (row cos, column
-# roughness), E_avg (one row), s_schlick5 (row cos, column roughness).
+# The texture (RGBA floats, LUT_WIDTH x LUT_HEIGHT), laid out so that a bilinear read of
+# four texels gives several tables at once (the lighting pass pays per fetch):
+# - rows S_IOR_ROW.. (cos), column z * S_SIZE + roughness: (s_ior at z slice k, s_ior at
+#   slice k + 1, 0, 0), so one read interpolates between two slices;
+# - rows E_ROW.. (cos), column roughness: (E, s_schlick5, E_avg, 0).
 LUT_WIDTH = S_SIZE * S_SIZE
 S_IOR_ROW = 0
 E_ROW = S_IOR_ROW + S_SIZE
-E_AVG_ROW = E_ROW + E_SIZE
-S5_ROW = E_AVG_ROW + 1
-LUT_HEIGHT = S5_ROW + S_SIZE
+LUT_HEIGHT = E_ROW + E_SIZE
 # The cosine of a view at the horizon's node, kept off 0 where the lobe degenerates.
 MIN_COS = 1e-4
 
@@ -119,8 +120,9 @@ def _lobe_samples(roughness, cos_view):
 def _tables_uncached():
     nodes_e = np.linspace(0.0, 1.0, E_SIZE)
     rough, mu = np.meshgrid(nodes_e, nodes_e, indexing="ij")      # [roughness, cos]
-    weight, _ = _lobe_samples(rough, mu)
+    weight, cos_e = _lobe_samples(rough, mu)
     e = weight.mean(axis=-1)                                       # [roughness, cos]
+    s5 = ((weight > 0.0) * (1.0 - cos_e) ** 5).mean(axis=-1)
     # E_avg = 2 * integral of E(cos) cos dcos, by Gauss-Legendre over cos.
     x, w = np.polynomial.legendre.leggauss(24)
     cos_g = 0.5 * (x + 1.0)
@@ -130,7 +132,6 @@ def _tables_uncached():
     rough_s, mu_s = np.meshgrid(nodes_s, nodes_s, indexing="ij")
     weight_s, cos_hv = _lobe_samples(rough_s, mu_s)                # [roughness, cos, N]
     valid = weight_s > 0.0
-    s5 = (valid * (1.0 - cos_hv) ** 5).mean(axis=-1)
     s_ior = np.empty((S_SIZE, S_SIZE, S_SIZE))                     # [z, roughness, cos]
     for k, z in enumerate(nodes_s):
         eta = ior_from_z(z)
@@ -145,27 +146,28 @@ _tables = ValueMemo(_tables_uncached, 1, key=lambda: ())
 
 def tables():
     """{"e": [roughness, cos] (32 x 32), "e_avg": [roughness] (32),
-    "s_ior": [z, roughness, cos] (16^3), "s5": [roughness, cos] (16 x 16)}, read-only."""
+    "s_ior": [z, roughness, cos] (16^3), "s5": [roughness, cos] (32 x 32)}, read-only."""
     return _tables()
 
 
 def lut_texture_rows():
-    """The tables packed into one (LUT_HEIGHT, LUT_WIDTH) float32 image, rows bottom first
-    as a texture holds them (layout: the ``*_ROW`` constants; brdf.glsl reads it)."""
+    """The tables packed into one (LUT_HEIGHT, LUT_WIDTH, 4) float32 image, rows bottom
+    first as a texture holds them (layout: the ``*_ROW`` constants; brdf.glsl reads it)."""
     t = tables()
-    image = np.zeros((LUT_HEIGHT, LUT_WIDTH), dtype=np.float32)
+    image = np.zeros((LUT_HEIGHT, LUT_WIDTH, 4), dtype=np.float32)
     for k in range(S_SIZE):
-        image[S_IOR_ROW:S_IOR_ROW + S_SIZE, k * S_SIZE:(k + 1) * S_SIZE] = t["s_ior"][k].T
-    image[E_ROW:E_ROW + E_SIZE, :E_SIZE] = t["e"].T
-    image[E_AVG_ROW, :E_SIZE] = t["e_avg"]
-    image[S5_ROW:S5_ROW + S_SIZE, :S_SIZE] = t["s5"].T
+        columns = slice(k * S_SIZE, (k + 1) * S_SIZE)
+        image[S_IOR_ROW:S_IOR_ROW + S_SIZE, columns, 0] = t["s_ior"][k].T
+        image[S_IOR_ROW:S_IOR_ROW + S_SIZE, columns, 1] = t["s_ior"][min(k + 1, S_SIZE - 1)].T
+    image[E_ROW:E_ROW + E_SIZE, :E_SIZE, 0] = t["e"].T
+    image[E_ROW:E_ROW + E_SIZE, :E_SIZE, 1] = t["s5"].T
+    image[E_ROW:E_ROW + E_SIZE, :E_SIZE, 2] = t["e_avg"][None, :]
     return image
 
 
 def glsl_defines():
     """The texture layout as ``#define``s for brdf.glsl: BSDF_LUT_E_ROW, ..."""
     return [("BSDF_LUT_S_IOR_ROW", str(S_IOR_ROW)), ("BSDF_LUT_E_ROW", str(E_ROW)),
-            ("BSDF_LUT_E_AVG_ROW", str(E_AVG_ROW)), ("BSDF_LUT_S5_ROW", str(S5_ROW)),
             ("BSDF_LUT_E_SIZE", str(E_SIZE)), ("BSDF_LUT_S_SIZE", str(S_SIZE))]
 
 

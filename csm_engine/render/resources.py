@@ -179,7 +179,7 @@ class Targets:
             from ..core import bsdf_tables
             rows = bsdf_tables.lut_texture_rows()
             self._bsdf_lut = gpu.types.GPUTexture(
-                (rows.shape[1], rows.shape[0]), format='R32F',
+                (rows.shape[1], rows.shape[0]), format='RGBA32F',
                 data=gpu.types.Buffer('FLOAT', rows.size, rows.ravel().tolist()))
         return self._bsdf_lut
 
