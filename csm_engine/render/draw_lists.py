@@ -77,12 +77,14 @@ class DrawMaterial:
     shadow tile and a kept G-buffer record of it."""
     __slots__ = ("block", "textures", "textured", "writes_emission", "alpha_mode",
                  "shadow_mode", "backface_culling", "backface_culling_shadow", "shadow_key",
-                 "gbuffer_key")
+                 "gbuffer_key", "writes_coat")
 
     def __init__(self, block, textures, textured, writes_emission, alpha_mode, shadow_mode,
-                 backface_culling, backface_culling_shadow, shadow_key, gbuffer_key):
+                 backface_culling, backface_culling_shadow, shadow_key, gbuffer_key,
+                 writes_coat=False):
         self.block, self.textures, self.textured = block, textures, textured
         self.writes_emission = writes_emission
+        self.writes_coat = writes_coat
         self.alpha_mode, self.shadow_mode = alpha_mode, shadow_mode
         self.backface_culling = backface_culling
         self.backface_culling_shadow = backface_culling_shadow
@@ -129,10 +131,10 @@ class CasterSignature(NamedTuple):
     material_keys: tuple
 
 
-def _writes_emission(items):
-    """Whether any camera draw of ``items`` has emission, metallic or a coat, i.e. needs
-    the G-buffer's emission and coat targets. Instances of one mesh share their ``MeshDraws``, so each is
-    looked at once."""
+def _writes(items, what="writes_emission"):
+    """Whether any camera draw of ``items`` needs the G-buffer's emission target (emission,
+    metallic or a coat: ``writes_emission``) or its coat target (``writes_coat``).
+    Instances of one mesh share their ``MeshDraws``, so each is looked at once."""
     seen = set()
     for entry in items:
         if id(entry) in seen:
@@ -140,7 +142,7 @@ def _writes_emission(items):
         seen.add(id(entry))
         for draws in (entry.textured, entry.masked, entry.untextured):
             for _batch, material in draws:
-                if material.writes_emission:
+                if getattr(material, what):
                     return True
     return False
 
@@ -150,11 +152,12 @@ class DrawLists:
     with them: the same items give the same answers. Per instance: whether each of
     GBUFFER_PROGRAMS and each shadow program (opaque, alpha-masked) draws it."""
     __slots__ = ("items", "writes_emission", "gbuffer_masks", "shadow_masks", "partial_mask",
-                 "signatures")
+                 "signatures", "writes_coat")
 
     def __init__(self, items):
         self.items = items
-        self.writes_emission = _writes_emission(items)
+        self.writes_emission = _writes(items)
+        self.writes_coat = _writes(items, "writes_coat")
         self.gbuffer_masks = tuple(
             np.array([bool(getattr(entry, program.draws)) and
                       (program.tangents is None or entry.has_tangents == program.tangents)
@@ -358,4 +361,4 @@ def _material(cache, mesh, slot, white, default_material, memo=None):
     return DrawMaterial(held[1], tuple(t or white for t in textures), any(loaded),
                         writes_emission, material.alpha_mode, material.shadow_mode,
                         material.backface_culling, material.backface_culling_shadow,
-                        shadow_key, gbuffer_key)
+                        shadow_key, gbuffer_key, material.coat_weight > 0.0)

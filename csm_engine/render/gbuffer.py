@@ -69,22 +69,16 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     emission = targets.texture("emission", (width, height), 'RGBA16F')
     facet = targets.texture("facet", (width, height), 'RGBA16F')
     coat = targets.texture("coat", (width, height), 'RGBA16F')
-    # Emission and metallic, and the coat, have targets only in frames that draw some:
-    # without them each fragment writes a third less (llvmpipe: ~15 % of the G-buffer each),
-    # and the lighting pass reads textures kept at zero.
+    # Emission and metallic have a target only in frames that draw some, and the coat one
+    # only in frames with a coated material (which write emission's too: the outputs are
+    # positional): without one each fragment writes a sixth less (llvmpipe: ~15 % of the
+    # G-buffer), and the lighting pass reads a texture kept at zero.
+    colors = (albedo, normal, view_depth, facet)
     if lists.writes_emission:
-        gbuffer_fb = targets.framebuffer("gbuffer", depth=depth,
-                                         colors=(albedo, normal, view_depth, facet, emission,
-                                                 coat))
-        targets.zeroed_emission = None
-    else:
-        gbuffer_fb = targets.framebuffer("gbuffer_no_emission", depth=depth,
-                                         colors=(albedo, normal, view_depth, facet))
-        if targets.zeroed_emission is not emission:
-            emission_fb = targets.framebuffer("emission_only", colors=(emission, coat))
-            with emission_fb.bind():
-                targets.call(emission_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
-            targets.zeroed_emission = emission
+        colors += (emission, coat) if lists.writes_coat else (emission,)
+    _keep_zero(targets, "zeroed_emission", emission, lists.writes_emission)
+    _keep_zero(targets, "zeroed_coat", coat, lists.writes_coat)
+    gbuffer_fb = targets.framebuffer(f"gbuffer_{len(colors)}", depth=depth, colors=colors)
     gbuffer = GBuffer(albedo, normal, view_depth, emission, facet, depth, gbuffer_fb, coat)
     # Near to far, so the early depth test skips the shading of hidden fragments.
     order = np.asarray(front_to_back(snap, instances.bounds_lo_hi), dtype=np.int64)
@@ -108,6 +102,18 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     if contents is not None and targets.records:
         frame_cache.gbuffer = HeldGBuffer(drawn_into, contents)
     return gbuffer, False
+
+
+def _keep_zero(targets, marker, texture, written):
+    """Clear ``texture`` to zero once when this frame does not write it (``marker``: the
+    ``Targets`` attribute naming the texture last cleared)."""
+    if written:
+        setattr(targets, marker, None)
+    elif getattr(targets, marker) is not texture:
+        fb = targets.framebuffer(f"{marker}_clear", colors=(texture,))
+        with fb.bind():
+            targets.call(fb.clear, color=(0.0, 0.0, 0.0, 0.0))
+        setattr(targets, marker, texture)
 
 
 def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuffer_fb,
@@ -165,7 +171,7 @@ def gbuffer_contents(targets, snap, cache, lists, order, world_from_objects,
     changed in place). In the viewport the camera is looked at first, so a redraw of a
     moving view pays for little else (its record holds only the camera, which the next
     redraw of that view completes)."""
-    camera = (programs_key(), lists.writes_emission,
+    camera = (programs_key(), lists.writes_emission, lists.writes_coat,
               FRAME_LAYOUT.field_bytes(frame_data, _GBUFFER_FRAME_FIELDS))
     held = targets.frame_cache.gbuffer
     # NOTE: the benchmark's Python-only redraw (``benchmark_skip_gpu_calls``) repeats the

@@ -101,6 +101,7 @@ class Targets:
         self._bsdf_lut = None
         self._ubo = None
         self.zeroed_emission = None     # the emission texture last cleared to zero
+        self.zeroed_coat = None         # the coat texture last cleared to zero
         # Wait for the GPU after each pass, so its time is its own (slower).
         self.profile = False
         # Benchmark only: every draw and clear is skipped (see ``call``), so a frame's

@@ -591,3 +591,25 @@ def test_render_samples_blend_hashed_alpha_smoothly(empty_scene):
     many = render_scene(scene, 128, 128)["combined"][44:84, 44:84, :3].mean(axis=-1)
     assert many.mean() == pytest.approx(one.mean(), rel=0.1)
     assert many.std() < 0.35 * one.std(), (many.std(), one.std())
+
+
+def test_coat_adds_its_layer_and_switched_off_leaves_nothing_behind(empty_scene):
+    """Two glossy red planes side by side under a sun from above; the left one has a
+    Principled Coat. Seen from above, the coat's highlight brightens it; with Coat Weight
+    back at 0 (the coat target is no longer written) both planes show the same pixels."""
+    scene = empty_scene
+    lit_scene(scene)
+    coated, bsdf = principled_material("coated", base=(0.6, 0.1, 0.1), roughness=0.5)
+    if "Coat Weight" not in bsdf.inputs:
+        pytest.skip("Principled v1 has no Coat")
+    bsdf.inputs["Coat Weight"].default_value = 1.0
+    bsdf.inputs["Coat Roughness"].default_value = 0.3
+    plain, _ = principled_material("plain", base=(0.6, 0.1, 0.1), roughness=0.5)
+    add_plane(2.0, (-1.25, 0, 0), coated)
+    add_plane(2.0, (1.25, 0, 0), plain)
+    top_camera(scene, ortho_scale=6.0)
+    color = render_scene(scene, 120, 60)["combined"][..., :3]
+    assert color[30, 30].sum() > color[30, 90].sum() + 0.1, (color[30, 30], color[30, 90])
+    bsdf.inputs["Coat Weight"].default_value = 0.0
+    color = render_scene(scene, 120, 60)["combined"][..., :3]
+    assert np.allclose(color[20:40, 20:40], color[20:40, 80:100], atol=1e-4)
