@@ -11,7 +11,8 @@ vec3 world_sh_sum(vec3 d, vec3 band_weights)
             (frame.world_sh[1].rgb * d.y + frame.world_sh[2].rgb * d.z +
              frame.world_sh[3].rgb * d.x);
   result += band_weights.z *
-            (1.092548 * (frame.world_sh[4].rgb * (d.x * d.y) + frame.world_sh[5].rgb * (d.y * d.z) +
+            (1.092548 * (frame.world_sh[4].rgb * (d.x * d.y) +
+                         frame.world_sh[5].rgb * (d.y * d.z) +
                          frame.world_sh[7].rgb * (d.x * d.z)) +
              0.315392 * frame.world_sh[6].rgb * (3.0 * d.z * d.z - 1.0) +
              0.546274 * frame.world_sh[8].rgb * (d.x * d.x - d.y * d.y));
