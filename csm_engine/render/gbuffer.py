@@ -2,12 +2,11 @@
 
 Owns the G-buffer's targets (``GBuffer``): albedo+specular, normal+roughness, view depth
 (0 = background), the triangle's own normal+the object's Shadow Terminator Geometry Offset
-(facet), emission+metallic, the coat (weight, roughness, IOR), and depth; materials are
-one uniform block each (core/material_layout.py). World positions are rebuilt from view
-depth where needed (``core.camera.world_positions``). Also owns ``GBufferContents``: what a
-G-buffer drawn now would hold, so that one the targets already hold is not drawn again (F12
-after a shadow or light setting changed; an unchanged re-render; a viewport redraw of an
-unmoved view).
+(facet), emission+metallic, coat, and depth; materials are one uniform block each
+(core/material_layout.py). World positions are rebuilt from view depth where needed
+(``core.camera.world_positions``). Also owns ``GBufferContents``: what a G-buffer drawn now
+would hold, so that one the targets already hold is not drawn again (F12 after a shadow or
+light setting changed; an unchanged re-render; a viewport redraw of an unmoved view).
 """
 
 from typing import NamedTuple
