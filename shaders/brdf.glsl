@@ -1,69 +1,293 @@
-/* The surface's response to one light (BRDF), in EEVEE's light units: Lambert diffuse and
- * energy-normalized Blinn-Phong specular with Principled BSDF's Specular and Metallic.
- * docs/lighting.md explains the units. */
-#include "surface.glsl"
+/* The Principled BSDF as Cycles evaluates it for direct light (Blender 4.x/5.x, Multiscatter
+ * GGX): a metallic GGX lobe with the F82-tint Fresnel, a dielectric GGX specular layer whose
+ * Fresnel is the real one of the IOR (Specular IOR Level applied), its directional albedo
+ * taken out of the Lambert diffuse beneath it, and multiple-scattering energy compensation
+ * on both lobes. The view-dependent part (table lookups, layer weights) is computed once
+ * per pixel (principled_setup); each light then costs one lobe evaluation
+ * (principled_eval). Tables: core/bsdf_tables.py, in the bsdf_lut texture. Units as EEVEE's
+ * (docs/lighting.md): the result is radiance for an irradiance of one. */
 
 const float PI = 3.14159265358979;
-/* Principled BSDF's convention: Specular level 0.5 is a reflectance of 0.04 at normal
- * incidence (glass, plastic), so F0 = 0.08 * level. */
+/* Principled's convention: Specular IOR Level 0.5 at IOR 1.5 is a reflectance of 0.04 at
+ * normal incidence, so the G-buffer's specular value s stands for F0 = 0.08 * s. */
 const float F0_PER_SPECULAR_LEVEL = 0.08;
 
-/* Outgoing radiance for an irradiance of one (W/m^2 on a surface facing the light), with
- * Principled's Metallic: a metal has no diffuse part and reflects its base colour,
- * F0 = mix(0.08 * specular, base colour, metallic); blinn_phong below is the dielectric. */
-vec3 surface_brdf(vec3 albedo, float metallic, float specular, float shininess, vec3 n,
-                  vec3 l, vec3 v)
+/* What a pixel's BSDF needs for every light, from its material and the view. */
+struct Principled {
+  vec3 diffuse_color;  /* Lambert albedo left under the specular layer (Cycles' DiffCol) */
+  vec3 specular_color; /* what the metal and specular lobes reflect of a uniform World
+                        * (Cycles' GlossCol) */
+  vec3 metal_f0;       /* base colour: the metal's reflectance at normal incidence */
+  vec3 metal_scale;    /* Metallic x multiple-scattering compensation of the metal lobe */
+  float specular_scale; /* (1 - Metallic) x compensation of the dielectric lobe */
+  float f0;            /* dielectric reflectance at normal incidence */
+  float eta;           /* the IOR that has it (1: no specular layer) */
+  float alpha2;        /* GGX alpha^2 = roughness^4 */
+  float n_dot_v;
+  float coat_scale;    /* Coat Weight x the coat lobe's compensation (0: no coat) */
+  float coat_alpha2;
+  float coat_eta;
+  float coat_transmission; /* what the coat lets through to the layers below */
+  float roughness;
+};
+
+/* A table of n x n nodes (x along a row, y across rows; core/bsdf_tables.py's layout) at
+ * (x, y) in 0..1, nodes at i / (n - 1), interpolated linearly as Cycles'
+ * lookup_table_read: four texels, every channel at once. */
+vec4 lut_table(int first_row, int first_column, int n, float x, float y)
 {
-  float n_dot_l = max(dot(n, l), 0.0);
-  if (n_dot_l <= 0.0) {
-    return vec3(0.0);
+  vec2 position = clamp(vec2(x, y), 0.0, 1.0) * float(n - 1);
+  ivec2 i = min(ivec2(position), ivec2(n - 1));
+  ivec2 j = min(i + 1, ivec2(n - 1));
+  vec2 t = position - vec2(i);
+  vec4 bottom = mix(texelFetch(bsdf_lut, ivec2(first_column + i.x, first_row + i.y), 0),
+                    texelFetch(bsdf_lut, ivec2(first_column + j.x, first_row + i.y), 0), t.x);
+  vec4 top = mix(texelFetch(bsdf_lut, ivec2(first_column + i.x, first_row + j.y), 0),
+                 texelFetch(bsdf_lut, ivec2(first_column + j.x, first_row + j.y), 0), t.x);
+  return mix(bottom, top, t.y);
+}
+
+/* E (GGX albedo), s_schlick5 and E_avg (x, y, z) for roughness r and view cosine mu. */
+vec3 ggx_albedo_tables(float r, float mu)
+{
+  return lut_table(BSDF_LUT_E_ROW, 0, BSDF_LUT_E_SIZE, r, mu).xyz;
+}
+
+float f0_from_ior(float eta)
+{
+  float r = (eta - 1.0) / (eta + 1.0);
+  return r * r;
+}
+
+float ior_from_f0(float f0)
+{
+  float root = sqrt(clamp(f0, 0.0, 0.99));
+  return (1.0 + root) / (1.0 - root);
+}
+
+/* Unpolarized Fresnel reflectance of a dielectric of relative IOR eta (Cycles'
+ * fresnel_dielectric_cos). */
+float fresnel_dielectric(float cos_i, float eta)
+{
+  float c = abs(cos_i);
+  float g = eta * eta - 1.0 + c * c;
+  if (g <= 0.0) {
+    return 1.0;
   }
-  vec3 h = normalize(l + v);
-  float exponent = max(shininess, 1.0);
-  vec3 f0 = mix(vec3(F0_PER_SPECULAR_LEVEL * specular), albedo, metallic);
-  float lobe = (exponent + 8.0) / (8.0 * PI) * pow(max(dot(n, h), 0.0), exponent);
-  return (albedo * ((1.0 - metallic) / PI) + f0 * lobe) * n_dot_l;
+  g = sqrt(g);
+  float a = (g - c) / (g + c);
+  float b = (c * (g + c) - 1.0) / (c * (g - c) + 1.0);
+  return 0.5 * a * a * (1.0 + b * b);
 }
 
-/* Outgoing radiance for an irradiance of one (W/m^2 on a surface facing the light): the
- * BRDF times cos(angle to the light). Units as EEVEE's (docs/lighting.md): diffuse is
- * Lambert, albedo / pi; specular is energy-normalized Blinn-Phong,
- * F0 (n + 8) / (8 pi) (n.h)^n, whose lobe reflects about F0 of the light whatever the
- * exponent, so a white surface never sends back more than it receives. */
-vec3 blinn_phong(vec3 albedo, float specular, float shininess, vec3 n, vec3 l, vec3 v)
+/* Smith's Lambda for GGX. */
+float ggx_lambda(float alpha2, float cos_n)
 {
-  return surface_brdf(albedo, 0.0, specular, shininess, n, l, v);
+  float tan2 = max(1.0 / (cos_n * cos_n) - 1.0, 0.0);
+  return 0.5 * (sqrt(1.0 + alpha2 * tan2) - 1.0);
 }
 
-/* The BRDF's two layers for the render passes (Diffuse and Glossy Light and Color),
- * whose products add up to surface_response. Blender defines the colour passes as what
- * each layer reflects of white light, and the light passes as the rest, so that
- * light x colour summed over the layers gives Combined. */
-/* Diffuse Color: the Lambert layer's albedo (a metal has none). */
-vec3 surface_diffuse_color(Surface s)
+/* GGX's D G / (4 cos(view)): a lobe's eval times cos(light) for a Fresnel of 1. */
+float ggx_lobe(float alpha2, float n_dot_h, float n_dot_v, float n_dot_l)
 {
-  return s.albedo * (1.0 - s.metallic);
+  float t = 1.0 + (alpha2 - 1.0) * n_dot_h * n_dot_h;
+  float d = alpha2 / (PI * t * t);
+  float g = 1.0 / (1.0 + ggx_lambda(alpha2, n_dot_v) + ggx_lambda(alpha2, n_dot_l));
+  return d * g / (4.0 * n_dot_v);
 }
 
-/* Glossy Color: the specular layer's reflectance at normal incidence (F0). */
-vec3 surface_specular_color(Surface s)
+/* Kulla-Conty's multiple-scattering Fresnel (Fms, with one Fss cancelled as Cycles does). */
+vec3 multiscatter_fresnel(vec3 fss, float e_avg)
 {
-  return mix(vec3(F0_PER_SPECULAR_LEVEL * s.specular), s.albedo, s.metallic);
+  return fss * e_avg / (1.0 - fss * (1.0 - e_avg));
 }
 
-/* surface_response(s, l) in its diffuse and specular parts (diffuse + specular equals it
- * up to rounding): the same terms as surface_brdf, kept apart. */
-void surface_response_split(Surface s, vec3 l, out vec3 diffuse, out vec3 specular)
+/* The table's share of the way from F0 to 1 of a dielectric of IOR eta, for roughness r
+ * and view cosine mu (Cycles' ggx_gen_schlick_ior_s). */
+float dielectric_albedo_share(float r, float mu, float eta)
 {
-  float n_dot_l = max(dot(s.normal, l), 0.0);
-  if (n_dot_l <= 0.0) {
-    diffuse = vec3(0.0);
-    specular = vec3(0.0);
+  float z = sqrt(abs((eta - 1.0) / (eta + 1.0)));
+  float slice = clamp(z, 0.0, 1.0) * float(BSDF_LUT_S_SIZE - 1);
+  int k = min(int(slice), BSDF_LUT_S_SIZE - 1);
+  /* Slice k's texels hold slices k and k + 1. */
+  vec2 slices = lut_table(BSDF_LUT_S_IOR_ROW, k * BSDF_LUT_S_SIZE, BSDF_LUT_S_SIZE, r, mu).xy;
+  return mix(slices.x, slices.y, slice - float(k));
+}
+
+/* A dielectric lobe's multiple-scattering Fresnel for roughness r (Cycles:
+ * microfacet_ggx_preserve_energy with Kulla-Conty's fit of the real Fresnel's average):
+ * x = the eval's factor 1 + Fms (1 - E) / E, y = the albedo's factor E + Fms (1 - E);
+ * e, e_avg: E and E_avg of the roughness and view (ggx_albedo_tables). */
+vec2 dielectric_compensation(float e, float e_avg, float f0, float eta)
+{
+  float real_f0 = f0_from_ior(eta);
+  float real_fss = (eta - 1.0) / (4.08567 + 1.00071 * eta);
+  float fss = mix(f0, 1.0, clamp((real_fss - real_f0) / (1.0 - real_f0), 0.0, 1.0));
+  float fms = multiscatter_fresnel(vec3(fss), e_avg).x;
+  return vec2(1.0 + fms * (1.0 - e) / max(e, 1e-6), e + fms * (1.0 - e));
+}
+
+/* Principled v1 as Blender 3.x's Cycles sets it up (single-scattering GGX, its default
+ * distribution): a Burley diffuse of base colour x (1 - Metallic), not darkened by the
+ * specular lobe, and one GGX lobe whose Fresnel runs from
+ * cspec0 = mix(0.08 x Specular, base colour, Metallic) to 1 as the real Fresnel of the IOR
+ * of 0.08 x Specular does (interpolate_fresnel_color). */
+Principled principled_v1_setup(Principled p, vec3 base, float m, float specular, float r,
+                               float mu)
+{
+  p.f0 = min(F0_PER_SPECULAR_LEVEL * max(specular, 0.0), 0.99);
+  p.eta = ior_from_f0(p.f0);
+  p.metal_f0 = mix(vec3(p.f0), clamp(base, 0.0, 1.0), m);
+  p.metal_scale = vec3(1.0);
+  p.specular_scale = 0.0;
+  p.coat_scale = 0.0;
+  p.coat_alpha2 = 0.0;
+  p.coat_eta = 1.0;
+  p.coat_transmission = 1.0;
+  p.diffuse_color = max(base, 0.0) * (1.0 - m);
+  /* What the lobe reflects of a uniform World: its albedo with this Fresnel. */
+  float e = ggx_albedo_tables(r, mu).x;
+  float s = p.eta != 1.0 ? dielectric_albedo_share(r, mu, p.eta) : 0.0;
+  p.specular_color = e * mix(p.metal_f0, vec3(1.0), s);
+  return p;
+}
+
+/* Principled v1's response (Cycles 3.x: bsdf_principled_diffuse's full Burley diffuse with
+ * retro-reflection, and GGX with the separable Smith term). */
+void principled_v1_eval(Principled p, vec3 n, vec3 v, vec3 l, float n_dot_l,
+                        out vec3 diffuse, out vec3 specular)
+{
+  float fl = pow(1.0 - n_dot_l, 5.0);
+  float fv = pow(1.0 - clamp(p.n_dot_v, 0.0, 1.0), 5.0);
+  float rr = p.roughness * (dot(l, v) + 1.0);
+  float f = (1.0 - 0.5 * fv) * (1.0 - 0.5 * fl) + rr * (fl + fv + fl * fv * (rr - 1.0));
+  diffuse = p.diffuse_color * (f * n_dot_l / PI);
+  specular = vec3(0.0);
+  if (p.n_dot_v <= 0.0 || p.alpha2 <= 1e-7) {
     return;
   }
-  vec3 h = normalize(l + s.to_camera);
-  float exponent = max(s.shininess, 1.0);
-  float lobe = (exponent + 8.0) / (8.0 * PI) * pow(max(dot(s.normal, h), 0.0), exponent);
-  diffuse = surface_diffuse_color(s) * (n_dot_l / PI);
-  specular = surface_specular_color(s) * (lobe * n_dot_l);
+  vec3 h = normalize(l + v);
+  float n_dot_h = dot(n, h);
+  float t = 1.0 + (p.alpha2 - 1.0) * n_dot_h * n_dot_h;
+  float d = p.alpha2 / (PI * t * t);
+  float g = 1.0 / ((1.0 + ggx_lambda(p.alpha2, p.n_dot_v)) *
+                   (1.0 + ggx_lambda(p.alpha2, n_dot_l)));
+  float real_f0 = f0_from_ior(p.eta);
+  float share = p.eta != 1.0 ?
+      (fresnel_dielectric(clamp(dot(h, v), 0.0, 1.0), p.eta) - real_f0) / (1.0 - real_f0) :
+      0.0;
+  specular = mix(p.metal_f0, vec3(1.0), share) * (d * g / (4.0 * p.n_dot_v));
+}
+
+/* The view-dependent part of the BSDF at a surface of normal n seen from direction v:
+ * base colour, Metallic, specular (F0 / 0.08, Specular IOR Level applied), Roughness and
+ * the Coat (weight, roughness, IOR); with PRINCIPLED_V1 (Blender < 4.0), v1's model. */
+Principled principled_setup(vec3 base, float metallic, float specular, float roughness,
+                            vec3 coat, vec3 n, vec3 v)
+{
+  Principled p;
+  float r = clamp(roughness, 0.0, 1.0);
+  float alpha = r * r;
+  float mu = clamp(dot(n, v), 0.0, 1.0);
+  float m = clamp(metallic, 0.0, 1.0);
+  p.alpha2 = alpha * alpha;
+  p.n_dot_v = dot(n, v);
+  p.roughness = r;
+#ifdef PRINCIPLED_V1
+  return principled_v1_setup(p, base, m, specular, r, mu);
+#endif
+
+  /* Coat: a dielectric GGX layer on top; what it reflects is taken from every layer
+   * below (and from the emission). */
+  float above = 1.0;
+  p.coat_scale = 0.0;
+  p.coat_alpha2 = 0.0;
+  p.coat_eta = max(coat.z, 1.0);
+  p.specular_color = vec3(0.0);
+  if (coat.x > 0.0 && p.coat_eta != 1.0) {
+    float coat_r = clamp(coat.y, 0.0, 1.0);
+    float coat_f0 = f0_from_ior(p.coat_eta);
+    vec3 coat_tables = ggx_albedo_tables(coat_r, mu);
+    vec2 compensation = dielectric_compensation(coat_tables.x, coat_tables.z, coat_f0,
+                                                p.coat_eta);
+    p.coat_scale = coat.x * compensation.x;
+    p.coat_alpha2 = coat_r * coat_r * coat_r * coat_r;
+    float albedo = compensation.y *
+                   mix(coat_f0, 1.0, dielectric_albedo_share(coat_r, mu, p.coat_eta));
+    p.specular_color = vec3(coat.x * albedo);
+    above = clamp(1.0 - coat.x * albedo, 0.0, 1.0);
+  }
+  p.coat_transmission = above;
+
+  vec3 tables = ggx_albedo_tables(r, mu);
+  float e = tables.x;
+  float e_avg = tables.z;
+  float missing = (1.0 - e) / max(e, 1e-6);
+
+  /* Metal: F82-tint with a white tint is Schlick's Fresnel from the base colour; its
+   * hemispherical average is F0 + (1 - F0) / 21. */
+  p.metal_f0 = clamp(base, 0.0, 1.0);
+  vec3 metal_fss = mix(p.metal_f0, vec3(1.0), 1.0 / 21.0);
+  vec3 metal_fms = multiscatter_fresnel(metal_fss, e_avg);
+  p.metal_scale = above * m * (1.0 + metal_fms * missing);
+  p.specular_color += above * m * (e + metal_fms * (1.0 - e)) *
+                      mix(p.metal_f0, vec3(1.0), tables.y);
+
+  /* Dielectric specular layer over the diffuse (weight 1 - Metallic, under the coat). */
+  float weight = above * (1.0 - m);
+  p.f0 = min(F0_PER_SPECULAR_LEVEL * max(specular, 0.0), 0.99);
+  p.eta = p.f0 > 0.0 ? ior_from_f0(p.f0) : 1.0;
+  float layer = 1.0;
+  p.specular_scale = 0.0;
+  if (p.eta != 1.0) {
+    vec2 compensation = dielectric_compensation(e, e_avg, p.f0, p.eta);
+    p.specular_scale = weight * compensation.x;
+    /* The layer's albedo for this view: the table's share of the way from F0 to 1. */
+    float albedo = compensation.y * mix(p.f0, 1.0, dielectric_albedo_share(r, mu, p.eta));
+    p.specular_color += weight * albedo;
+    layer = clamp(1.0 - albedo, 0.0, 1.0);
+  }
+  p.diffuse_color = max(base, 0.0) * weight * layer;
+  return p;
+}
+
+/* Radiance towards v for an irradiance of one from direction l, split into the diffuse
+ * and the specular (metal + dielectric) lobes. */
+void principled_eval(Principled p, vec3 n, vec3 v, vec3 l, out vec3 diffuse,
+                     out vec3 specular)
+{
+  float n_dot_l = dot(n, l);
+  diffuse = p.diffuse_color * (max(n_dot_l, 0.0) / PI);
+  specular = vec3(0.0);
+  /* Cycles evaluates no lobe for a view below the surface, nor a near-mirror lobe
+   * (alpha^2 <= 1e-7) for a point light: its highlight is a delta. */
+  if (n_dot_l <= 0.0) {
+    return;
+  }
+#ifdef PRINCIPLED_V1
+  principled_v1_eval(p, n, v, l, n_dot_l, diffuse, specular);
+  return;
+#endif
+  if (p.n_dot_v <= 0.0) {
+    return;
+  }
+  vec3 h = normalize(l + v);
+  float n_dot_h = dot(n, h);
+  float h_dot_v = clamp(dot(h, v), 0.0, 1.0);
+  float lobe = p.alpha2 > 1e-7 ? ggx_lobe(p.alpha2, n_dot_h, p.n_dot_v, n_dot_l) : 0.0;
+  float x = 1.0 - h_dot_v;
+  float x2 = x * x;
+  vec3 metal_f = mix(p.metal_f0, vec3(1.0), x2 * x2 * x);
+  float dielectric_f = 0.0;
+  if (p.eta != 1.0) {
+    float real_f0 = f0_from_ior(p.eta);
+    float s = clamp((fresnel_dielectric(h_dot_v, p.eta) - real_f0) / (1.0 - real_f0), 0.0,
+                    1.0);
+    dielectric_f = mix(p.f0, 1.0, s);
+  }
+  specular = lobe * (p.metal_scale * metal_f + p.specular_scale * dielectric_f);
+  if (p.coat_scale > 0.0 && p.coat_alpha2 > 1e-7) {
+    specular += vec3(p.coat_scale * fresnel_dielectric(h_dot_v, p.coat_eta) *
+                     ggx_lobe(p.coat_alpha2, n_dot_h, p.n_dot_v, n_dot_l));
+  }
 }

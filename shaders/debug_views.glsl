@@ -153,7 +153,7 @@ vec3 debug_view_color(Surface s, vec3 color, float sun_visibility, float cascade
     color = shadow_error_color(s, color, sun_visibility);
   }
   else if (debug_view == DEBUG_SPECULAR) {
-    color = vec3(s.specular, s.shininess / 256.0, s.metallic);
+    color = vec3(s.specular, s.roughness, s.metallic);
   }
   return color;
 }

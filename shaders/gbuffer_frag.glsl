@@ -1,21 +1,32 @@
 /* G-buffer pass, fragment stage: one material (MaterialData, core/material_layout.py) per
  * draw.
- * out_albedo   = base colour rgb, specular strength
- * out_normal   = world normal xyz (normal-mapped where the material has a map), shininess
+ * out_albedo   = base colour rgb, specular: the dielectric layer's F0 / 0.08 (Specular IOR
+ *                Level at IOR 1.5)
+ * out_normal   = world normal xyz (normal-mapped where the material has a map), roughness
  * out_depth    = view depth along the camera's forward axis (0 = background)
  * out_facet    = the triangle's own normal xyz (on the shading normal's side), the
  *                object's Shadow Terminator Geometry Offset
  * out_emission = emitted radiance rgb (W/m^2/sr, EEVEE's units), metallic
- * out_ids      = (CRYPTOMATTE programs only) the object's, material's and asset's
+ * out_coat     = Principled Coat weight, roughness, IOR
+ * out_ids      = (CRYPTOMATTE programs only, in out_coat's place: they draw the G-buffer
+ *                a second time, render/gbuffer.py) the object's, material's and asset's
  *                Cryptomatte IDs (core/cryptomatte.py), 1 */
 
 #include "alpha_hash.glsl"
 
-/* Roughness -> Blinn-Phong exponent (Beckmann-style 2/r^4 - 2), clamped to 1..4096. */
-float roughness_shininess(float roughness)
+/* The course's Blinn-Phong exponent -> roughness, the inverse of the Beckmann-style
+ * exponent 2 / r^4 - 2. */
+float shininess_roughness(float shininess)
 {
-  float r = clamp(roughness, 0.02, 1.0);
-  return clamp(2.0 / (r * r * r * r) - 2.0, 1.0, 4096.0);
+  return sqrt(sqrt(2.0 / (max(shininess, 0.0) + 2.0)));
+}
+
+/* Principled's specular layer: F0 of the IOR scaled by 2 x Specular IOR Level (Cycles'
+ * ior_from_F0 clamps it at 0.99), as the G-buffer's F0 / 0.08. */
+float specular_value(float ior, float level)
+{
+  float r = (ior - 1.0) / (ior + 1.0);
+  return min(r * r * 2.0 * max(level, 0.0), 0.99) / 0.08;
 }
 
 void main()
@@ -55,7 +66,6 @@ void main()
   float metallic = material.metallic;
   float roughness = material.roughness;
   float level = material.specular_level;
-  float shininess;
   float specular;
   bool has_surface = material.roughness_channel >= 0 || material.metallic_channel >= 0;
 #ifdef UNTEXTURED
@@ -69,8 +79,8 @@ void main()
     /* The course's files: shininess / 256 in green (0.01 where green is 0), specular
      * level in blue; no metal (docs/materials.md). */
     float green = surface[material.roughness_channel];
-    shininess = green > 0.0 ? 256.0 * green : 0.01;
-    specular = surface[material.metallic_channel];
+    roughness = shininess_roughness(green > 0.0 ? 256.0 * green : 0.01);
+    specular = specular_value(1.5, surface[material.metallic_channel]);
     metallic = 0.0;
   }
   else {
@@ -80,11 +90,7 @@ void main()
     if (material.metallic_channel >= 0) {
       metallic = surface[material.metallic_channel];
     }
-    shininess = roughness_shininess(roughness);
-    /* A fully rough surface has no visible highlight; without this, roughness 1 (glTF's
-     * default) gives exponent 1 and washes everything white. */
-    float smooth_part = 1.0 - clamp(roughness, 0.0, 1.0);
-    specular = level * smooth_part * smooth_part;
+    specular = specular_value(material.ior, level);
   }
   vec3 emission = material.emission;
 #ifndef UNTEXTURED
@@ -93,9 +99,12 @@ void main()
   }
 #endif
   out_albedo = vec4(base.rgb, specular);
-  out_normal = vec4(n, shininess);
+  out_normal = vec4(n, clamp(roughness, 0.0, 1.0));
   out_depth = max(view_depth, 1e-6);
   out_emission = vec4(emission, clamp(metallic, 0.0, 1.0));
+#ifndef CRYPTOMATTE
+  out_coat = vec4(material.coat_weight, material.coat_roughness, material.coat_ior, 0.0);
+#endif
   /* The triangle's own plane: every pixel of a quad (helpers too) interpolates this
    * triangle, so the derivatives are exactly its edges. Turned to the side the shading
    * normal is on. */

@@ -11,17 +11,12 @@
 #include "surface.glsl"
 #include "brdf.glsl"
 #include "lights.glsl"
+#include "world_light.glsl"
 #include "ao_upsample.glsl"
 #include "shadow_lookup.glsl"
 #include "cascade_selection.glsl"
 #include "terminator.glsl"
 #include "debug_views.glsl"
-
-/* Outgoing radiance of surface s for an irradiance of one from direction l (surface_brdf). */
-vec3 surface_response(Surface s, vec3 l)
-{
-  return surface_brdf(s.albedo, s.metallic, s.specular, s.shininess, s.normal, l, s.to_camera);
-}
 
 #ifdef PASSES
 /* What the diffuse and specular layers reflect of every light so far (W/m^2/sr), for the
@@ -48,23 +43,28 @@ void add_to_light_passes(Surface s, vec3 l, vec3 irradiance)
  * reaching s in `visibility`). */
 vec3 ambient_light(Surface s, ivec2 px, out float visibility)
 {
-  /* A uniform World of radiance L: irradiance pi * L times the Lambert BRDF albedo / pi. */
-  vec3 color = frame.ambient_color * s.albedo;
-  /* Ambient occlusion darkens only this term, as in EEVEE: direct light has its shadows. */
+  /* Each lobe sends back the World's light times its albedo (the split sum of EEVEE, with
+   * Cycles' tables): the diffuse colour under the specular layer times the irradiance of
+   * the normal, and what the specular lobes reflect for this view times the World seen
+   * around the reflected direction. A uniform World of radiance L gives L times each. */
+  vec3 color = surface_diffuse_color(s) * world_diffuse_radiance(s.normal) +
+               surface_specular_color(s) *
+               world_specular_radiance(reflect(-s.to_camera, s.normal), s.roughness);
+  /* Ambient occlusion darkens only this term, as in EEVEE (its horizon scan occludes the
+   * diffuse and the specular World light alike): direct light has its shadows. */
   visibility = frame.ao_enabled != 0 ?
       mix(1.0, ambient_occlusion_at(px, s.view_depth, s.depth_slope), frame.ao_strength) : 1.0;
   return color * visibility;
 }
 
 /* ambient_light in its diffuse and specular parts, for the light passes (the two add up
- * to what ambient_light returns for the same `visibility`): the World times the diffuse
- * layer's colour is the diffuse part; the rest of albedo x World (a metal's, which has no
- * diffuse layer) the specular. Change both together. */
+ * to what ambient_light returns for the same `visibility`). Change both together. */
 void ambient_light_split(Surface s, float visibility, out vec3 diffuse, out vec3 specular)
 {
-  vec3 world = frame.ambient_color * visibility;
-  diffuse = world * surface_diffuse_color(s);
-  specular = world * s.albedo - diffuse;
+  diffuse = surface_diffuse_color(s) * world_diffuse_radiance(s.normal) * visibility;
+  specular = surface_specular_color(s) *
+             world_specular_radiance(reflect(-s.to_camera, s.normal), s.roughness) *
+             visibility;
 }
 
 /* Adds the sun's light on surface s to `color`, through its cascaded shadow maps. Returns

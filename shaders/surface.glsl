@@ -1,6 +1,8 @@
 /* The surface at one pixel as the lighting pass reads it back from the G-buffer (targets
  * written by gbuffer_frag.glsl): world position rebuilt from the view depth, shading and
- * shadow normals, material, and the view depth's slope across the screen. */
+ * shadow normals, material, and the view depth's slope across the screen; and its response
+ * to a light (the Principled BSDF of brdf.glsl, set up once per pixel). */
+#include "brdf.glsl"
 
 /* One pixel's surface. Positions and distances in scene units, normals unit length. */
 struct Surface {
@@ -12,11 +14,13 @@ struct Surface {
   vec3 shadow_normal;      /* the plane shadow lookups follow (see gbuffer_surface) */
   float terminator_offset; /* the object's Shadow Terminator Geometry Offset */
   vec3 albedo;             /* base colour */
-  float specular;          /* Principled Specular level */
-  float shininess;         /* Blinn-Phong exponent */
+  float specular;          /* dielectric F0 / 0.08: Specular IOR Level at IOR 1.5 */
+  float roughness;         /* Principled Roughness */
   float metallic;
-  vec3 emission;           /* emitted radiance, W/m^2/sr */
+  vec3 coat;               /* Principled Coat weight, roughness, IOR */
+  vec3 emission;           /* emitted radiance, W/m^2/sr (under the coat) */
   vec3 to_camera;          /* unit direction to the eye */
+  Principled bsdf;         /* the BSDF's view-dependent part (principled_setup) */
 };
 
 /* World position of the pixel at this view depth. On the line through the pixel from the
@@ -62,10 +66,44 @@ Surface gbuffer_surface(ivec2 px, vec2 uv, float depth)
   s.terminator_offset = facet_target.w;
   s.albedo = albedo_spec.rgb;
   s.specular = albedo_spec.a;
-  s.shininess = normal_shine.w;
+  s.roughness = normal_shine.w;
   s.metallic = emission_metallic.a;
   s.emission = emission_metallic.rgb;
+  s.coat = texelFetch(gbuffer_coat, px, 0).xyz;
   s.to_camera = frame.is_perspective != 0 ? normalize(frame.camera_position - s.position) :
                                             -frame.camera_forward;
+  s.bsdf = principled_setup(s.albedo, s.metallic, s.specular, s.roughness, s.coat, s.normal,
+                            s.to_camera);
+  /* Cycles' emission lies under the coat: what the coat reflects does not come through. */
+  s.emission *= s.bsdf.coat_transmission;
   return s;
+}
+
+/* Radiance of surface s towards the camera for an irradiance of one from direction l,
+ * split into its diffuse and specular lobes (diffuse + specular = surface_response). */
+void surface_response_split(Surface s, vec3 l, out vec3 diffuse, out vec3 specular)
+{
+  principled_eval(s.bsdf, s.normal, s.to_camera, l, diffuse, specular);
+}
+
+/* Radiance of surface s towards the camera for an irradiance of one from direction l. */
+vec3 surface_response(Surface s, vec3 l)
+{
+  vec3 diffuse;
+  vec3 specular;
+  surface_response_split(s, l, diffuse, specular);
+  return diffuse + specular;
+}
+
+/* Blender's Diffuse Color: the albedo of the diffuse lobe (base colour under the specular
+ * layer, without the metal's share). */
+vec3 surface_diffuse_color(Surface s)
+{
+  return s.bsdf.diffuse_color;
+}
+
+/* Blender's Glossy Color: what the metal and specular lobes reflect of a uniform World. */
+vec3 surface_specular_color(Surface s)
+{
+  return s.bsdf.specular_color;
 }

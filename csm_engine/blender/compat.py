@@ -3,8 +3,9 @@
 Owns the shims: reading mesh data through generic attributes where they exist (3.5+, one
 memory copy) and through the older per-element paths before; corner normals (4.1+) versus
 ``calc_normals_split``; RenderResult passes that take a flat array (4.x+) or rows (3.4),
-and render pass names (spelled out in 5.0, short before); the Principled BSDF's renamed
-specular and emission inputs; material alpha, shadow and culling settings (``blend_method``/``shadow_method`` up to 4.1, ``surface_render_method``/
+and render pass names (spelled out in 5.0, short before); the Principled BSDF's model (v1
+before 4.0) and its renamed specular and emission inputs; material alpha, shadow and
+culling settings (``blend_method``/``shadow_method`` up to 4.1, ``surface_render_method``/
 ``use_transparent_shadow`` from 4.2); MikkTSpace tangents; the glTF importer of 3.4/3.5 that needs
 ``np.bool``; node groups' sockets (``interface`` from 4.0); an object's Shadow Terminator
 Geometry Offset (Object in 5.0, the Cycles
@@ -25,6 +26,10 @@ from ..core.frame import DEFAULT_TERMINATOR_OFFSET
 PRINCIPLED_SPECULAR_INPUTS = ("Specular IOR Level", "Specular")
 # Principled BSDF emission colour: "Emission Color" in 4.0+, "Emission" before.
 PRINCIPLED_EMISSION_INPUTS = ("Emission Color", "Emission")
+# The Principled BSDF model this Blender's Cycles evaluates: v1 (Disney-style, Burley
+# diffuse, no layering) before 4.0, v2 from 4.0 (brdf.glsl evaluates both; the shaders
+# get PRINCIPLED_V1 defined on a v1 host).
+PRINCIPLED_V1 = bpy.app.version < (4, 0, 0)
 # Separate RGB (3.4 .. 4.x, outputs R/G/B) and Separate Color (3.3+, Red/Green/Blue).
 SEPARATE_NODE_TYPES = frozenset({'SEPARATE_COLOR', 'SEPRGB'})
 

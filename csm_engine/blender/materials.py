@@ -164,6 +164,13 @@ def material_info(material):
     specular = _find_input(bsdf, *compat.PRINCIPLED_SPECULAR_INPUTS)
     info.specular_level = float(specular.default_value) \
         if specular is not None and not specular.is_linked else 0.5
+    # Principled v2 (Specular IOR Level) reflects by its IOR; v1's IOR is for transmission
+    # only and its Specular 0.5 is 4% reflectance, which IOR 1.5 gives.
+    ior = _find_input(bsdf, "IOR")
+    if specular is not None and specular.name == compat.PRINCIPLED_SPECULAR_INPUTS[0] and \
+            ior is not None and not ior.is_linked:
+        info.ior = max(float(ior.default_value), 1.0)
+    _coat(info, bsdf)
     _emission(info, _find_input(bsdf, *compat.PRINCIPLED_EMISSION_INPUTS),
               _find_input(bsdf, "Emission Strength"))
     normal = _find_input(bsdf, "Normal")
@@ -177,6 +184,21 @@ def material_info(material):
                 info.tangent_uv = node.uv_map or ""
     _alpha(info, material, _find_input(bsdf, "Alpha"))
     return info
+
+
+def _coat(info, bsdf):
+    """Principled v2's Coat (Weight, Roughness, IOR; factors). v1's Clearcoat is another
+    model and is not read."""
+    weight = _find_input(bsdf, "Coat Weight")
+    if weight is None or weight.is_linked or weight.default_value <= 0.0:
+        return
+    info.coat_weight = min(float(weight.default_value), 1.0)
+    roughness = _find_input(bsdf, "Coat Roughness")
+    if roughness is not None and not roughness.is_linked:
+        info.coat_roughness = float(roughness.default_value)
+    ior = _find_input(bsdf, "Coat IOR")
+    if ior is not None and not ior.is_linked:
+        info.coat_ior = max(float(ior.default_value), 1.0)
 
 
 def _alpha(info, material, alpha_socket):

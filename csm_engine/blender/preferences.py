@@ -16,6 +16,7 @@ from bpy.props import StringProperty
 
 from ..core import paths
 from ..render import shaders
+from . import compat
 
 # The top package: "csm_engine", or "bl_ext.user_default.csm_engine" as an extension.
 ADDON_MODULE = __package__.rpartition(".")[0]
@@ -137,6 +138,7 @@ def register():
     # pip bpy registers without enabling: give the preferences the entry enabling makes.
     addon_preferences(create=True)
     shaders.LIBRARY.preferred_folder = chosen_shader_folder
+    shaders.LIBRARY.host_defines = (("PRINCIPLED_V1", "1"),) if compat.PRINCIPLED_V1 else ()
 
 
 def unregister():

@@ -13,7 +13,7 @@ import itertools
 import numpy as np
 
 from . import compat
-from ..core import settings_model
+from ..core import settings_model, world_light
 from ..core.camera import CameraView
 from ..core.frame import FrameSnapshot, MeshInstance, PointLight, SpotLight, Sun
 from ..core.frame_layout import MAX_POINT_LIGHTS, MAX_SPOT_LIGHTS
@@ -114,6 +114,26 @@ def settings_snapshot(scene, warnings=None):
     return Settings(**values)
 
 
+def _world_light(world, warnings=None):
+    """The World's radiance as one colour (``_world_color``) and, when an Environment
+    Texture feeds the Background, as spherical harmonics (``environment_sh``, times the
+    Background strength; else None)."""
+    color = _world_color(world, warnings)
+    if world is None or not (world.use_nodes and world.node_tree):
+        return color, None
+    for node in world.node_tree.nodes:
+        if node.type == 'BACKGROUND' and node.inputs[0].is_linked:
+            source = node.inputs[0].links[0].from_node
+            image = getattr(source, "image", None)
+            if source.type == 'TEX_ENVIRONMENT' and image is not None and \
+                    getattr(source, "projection", 'EQUIRECTANGULAR') == 'EQUIRECTANGULAR':
+                sh = environment_sh(image)
+                if sh is not None:
+                    return color, sh * node.inputs[1].default_value
+            break
+    return color, None
+
+
 def _world_color(world, warnings=None):
     """The World's radiance as one colour: the Background colour times its strength; when
     an Environment (or Image) Texture feeds the colour, the texture's average over the
@@ -150,19 +170,14 @@ def _srgb_to_linear(c):
     return np.where(c <= 0.04045, c / 12.92, ((c + 0.055) / 1.055) ** 2.4)
 
 
-def environment_average(image, equirectangular=True):
-    """Mean linear radiance (rgb) of an environment image over the sphere: rows of an
-    equirectangular map are weighted by the solid angle they cover (cos of latitude).
-    None when the image has no pixels (a missing file)."""
+def _environment_pixels(image):
+    """An environment image's linear rgb (height, width, 3), row 0 at the bottom; None when
+    it has no pixels."""
     try:
         width, height = image.size
         channels = image.channels
     except (ReferenceError, AttributeError):
         return None
-    key = (image.name, width, height, image.filepath_raw, bool(image.is_dirty))
-    held = _ENVIRONMENT_AVERAGES.get(image.name)
-    if held is not None and held[0] == key:
-        return held[1]
     if width * height == 0 or channels < 3:
         return None
     pixels = np.empty(width * height * channels, dtype=np.float32)
@@ -171,6 +186,45 @@ def environment_average(image, equirectangular=True):
     # Byte images hold their colour space's values; float images (HDR, EXR) are linear.
     if not image.is_float and image.colorspace_settings.name in {"sRGB", "sRGB EOTF"}:
         rgb = _srgb_to_linear(rgb)
+    return rgb
+
+
+# Image -> (what the coefficients were taken from, the coefficients).
+_ENVIRONMENT_SH = {}
+
+
+def environment_sh(image):
+    """The radiance of an equirectangular environment image as spherical harmonics
+    (``core.world_light.radiance_sh``, (9, 3)); None when it has no pixels. Read once per
+    image until it changes."""
+    try:
+        key = (image.name, tuple(image.size), image.filepath_raw, bool(image.is_dirty))
+    except (ReferenceError, AttributeError):
+        return None
+    held = _ENVIRONMENT_SH.get(image.name)
+    if held is not None and held[0] == key:
+        return held[1]
+    rgb = _environment_pixels(image)
+    coefficients = None if rgb is None else world_light.radiance_sh(rgb)
+    _ENVIRONMENT_SH[image.name] = (key, coefficients)
+    return coefficients
+
+
+def environment_average(image, equirectangular=True):
+    """Mean linear radiance (rgb) of an environment image over the sphere: rows of an
+    equirectangular map are weighted by the solid angle they cover (cos of latitude).
+    None when the image has no pixels (a missing file)."""
+    held = _ENVIRONMENT_AVERAGES.get(getattr(image, "name", None))
+    try:
+        key = (image.name, *image.size, image.filepath_raw, bool(image.is_dirty))
+    except (ReferenceError, AttributeError):
+        return None
+    if held is not None and held[0] == key:
+        return held[1]
+    rgb = _environment_pixels(image)
+    if rgb is None:
+        return None
+    height = rgb.shape[0]
     if equirectangular:
         latitude = (np.arange(height) + 0.5) / height * np.pi - 0.5 * np.pi
         weights = np.cos(latitude)
@@ -232,11 +286,14 @@ def take(depsgraph, camera, is_viewport=False):
                          pixel_filter_width=float(getattr(scene.render, "filter_size", 1.5)),
                          is_viewport=bool(is_viewport),
                          scene_name=scene.name)
-    # The World is a uniform radiance L: a diffuse surface receives the irradiance pi * L
-    # and sends back albedo/pi of it, so ambient light is L * albedo, as in EEVEE.
-    world_color = _world_color(scene.world, warnings)
+    # A uniform World of radiance L: a diffuse surface receives the irradiance pi * L and
+    # sends back albedo/pi of it, so ambient light is L * albedo, as in EEVEE. An
+    # environment image lights each normal by its own irradiance (spherical harmonics).
+    world_color, world_sh = _world_light(scene.world, warnings)
     light_threshold = _light_threshold(scene)
     snap.ambient = world_color * snap.settings.ambient_strength
+    if world_sh is not None:
+        snap.world_sh = world_sh * snap.settings.ambient_strength
     snap.background = world_color
 
     matrices = []

@@ -74,6 +74,9 @@ class FrameSnapshot:
     instances: list = field(default_factory=list)
     mesh_sources: dict = field(default_factory=dict)   # key -> evaluated object
     ambient: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    # The World's radiance as spherical harmonics (core/world_light.py), times Ambient
+    # Strength as ``ambient``; None: the uniform ``ambient``.
+    world_sh: np.ndarray = None
     background: np.ndarray = field(default_factory=lambda: np.zeros(3))
     film_transparent: bool = False
     pixel_filter_width: float = 1.5    # Film > Filter Size (pixels): final-render AA spread
@@ -85,8 +88,10 @@ class FrameSnapshot:
 
 
 def spot_cone_cosines(spot):
-    """cos of the outer and inner cone half-angles, Blender's spot_blend softening."""
+    """cos of the outer cone half-angle, and the cosine where Blender's spot_blend
+    softening ends: Cycles and EEVEE blend linearly in the cosine, over spot_blend of the
+    way from the cone's edge to its axis."""
     half = 0.5 * spot.spot_size
     cos_outer = math.cos(half)
-    cos_inner = math.cos(half * (1.0 - min(max(spot.spot_blend, 0.0), 1.0)))
+    cos_inner = cos_outer + (1.0 - cos_outer) * min(max(spot.spot_blend, 0.0), 1.0)
     return cos_outer, max(cos_inner, cos_outer + 1e-4)

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 
+from . import world_light
 from .frame import spot_cone_cosines
 from .frame_layout import (CASCADE_SELECTION_INDEX, DEBUG_VIEW_INDEX, FRAME_LAYOUT,
                            LIGHT_FALLOFF_INDEX, MAX_CASCADES, MAX_POINT_LIGHTS,
@@ -55,6 +56,14 @@ def sun_tan_half_angle(sun):
         return 0.0
     angle = min(max(float(sun.angle), 0.0), math.radians(179.0))
     return math.tan(0.5 * angle)
+
+
+def _world_sh(snap):
+    """The frame's World radiance coefficients (9 vec4): the snapshot's, else its uniform
+    ambient colour's."""
+    coefficients = snap.world_sh if snap.world_sh is not None else \
+        world_light.uniform_sh(snap.ambient)
+    return np.pad(np.asarray(coefficients, dtype=np.float64), ((0, 0), (0, 1)))
 
 
 def ambient_occlusion_fields(snap, clip_from_world=None):
@@ -201,6 +210,7 @@ def _snapshot_fields(snap):
         camera_forward=camera.forward,
         viewport_size=(camera.width, camera.height),
         ambient_color=snap.ambient,
+        world_sh=_world_sh(snap),
         background_alpha=0.0 if snap.film_transparent else 1.0,
         background_color=snap.background,
         sun_direction=sun.to_light if sun is not None else (0.0, 0.0, 0.0),

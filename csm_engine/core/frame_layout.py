@@ -402,6 +402,8 @@ FRAME_LAYOUT = UniformLayout("FrameData", (
     ("viewport_size", "vec2", "width and height of the render (pixels)"),
     ("ambient_color", "vec3", "uniform World radiance lighting every surface (linear rgb, "
                               "W/m^2/sr)"),
+    ("world_sh", "vec4", 9, "the World's radiance lighting every surface as spherical "
+                            "harmonics up to band 2 (rgb, W/m^2/sr; core/world_light.py)"),
     ("background_alpha", "float", "alpha of background pixels: 0 with Film > Transparent"),
     ("background_color", "vec3", "linear rgb of the World behind the scene"),
     ("sun_direction", "vec3", "unit world direction towards the sun"),

@@ -35,6 +35,11 @@ MATERIAL_LAYOUT = UniformLayout("MaterialData", (
     ("metallic", "float", "0 dielectric .. 1 metal (Principled Metallic)"),
     ("roughness", "float", "0 mirror .. 1 fully rough (Principled Roughness)"),
     ("specular_level", "float", "Principled Specular (IOR Level): 0.5 is 4% reflectance"),
+    ("coat_weight", "float", "Principled Coat Weight: 0 none .. 1 a full clear coat"),
+    ("coat_roughness", "float", "Principled Coat Roughness"),
+    ("coat_ior", "float", "Principled Coat IOR"),
+    ("ior", "float", "Principled IOR of the specular layer (1.5 where Principled v1 has "
+                     "none: Specular 0.5 is then 4% reflectance)"),
     ("normal_strength", "float", "Normal Map node Strength: 0 geometry normal .. 1 full map"),
     ("alpha_cutoff", "float", "ALPHA_CLIP: alpha below this is cut out (0..1)"),
     ("alpha_mode", "int", "ALPHA_* of the camera passes"),

@@ -373,8 +373,8 @@ _SETTINGS = (
             POSITION=("G-buffer: position", "World position in repeating bands 1/20 of the "
                                             "shadow distance wide"),
             DEPTH=("G-buffer: depth", "View depth, normalised to the shadow distance"),
-            SPECULAR=("G-buffer: specular", "Specular strength (red) and shininess / 256 "
-                                            "(green)"),
+            SPECULAR=("G-buffer: specular", "Specular level (red: 0.5 is 4% reflectance), "
+                                            "roughness (green), metallic (blue)"),
             AMBIENT_OCCLUSION=("Ambient occlusion", "The factor the ambient light is "
                                                     "multiplied by: white open, black fully "
                                                     "occluded"),

@@ -109,13 +109,14 @@ class DrawMaterial:
     shadow tile and a kept G-buffer record of it."""
     __slots__ = ("block", "textures", "textured", "writes_emission", "alpha_mode",
                  "shadow_mode", "backface_culling", "backface_culling_shadow", "shadow_key",
-                 "gbuffer_key", "name")
+                 "gbuffer_key", "name", "writes_coat")
 
     def __init__(self, block, textures, textured, writes_emission, alpha_mode, shadow_mode,
                  backface_culling, backface_culling_shadow, shadow_key, gbuffer_key,
-                 name=""):
+                 name="", writes_coat=False):
         self.block, self.textures, self.textured = block, textures, textured
         self.writes_emission = writes_emission
+        self.writes_coat = writes_coat
         self.alpha_mode, self.shadow_mode = alpha_mode, shadow_mode
         self.backface_culling = backface_culling
         self.backface_culling_shadow = backface_culling_shadow
@@ -163,10 +164,10 @@ class CasterSignature(NamedTuple):
     material_keys: tuple
 
 
-def _writes_emission(items):
-    """Whether any camera draw of ``items`` has emission or metallic, i.e. needs the
-    G-buffer's emission target. Instances of one mesh share their ``MeshDraws``, so each is
-    looked at once."""
+def _writes(items, what="writes_emission"):
+    """Whether any camera draw of ``items`` needs the G-buffer's emission target (emission,
+    metallic or a coat: ``writes_emission``) or its coat target (``writes_coat``).
+    Instances of one mesh share their ``MeshDraws``, so each is looked at once."""
     seen = set()
     for entry in items:
         if id(entry) in seen:
@@ -174,7 +175,7 @@ def _writes_emission(items):
         seen.add(id(entry))
         for draws in (entry.textured, entry.masked, entry.untextured):
             for _batch, material in draws:
-                if material.writes_emission:
+                if getattr(material, what):
                     return True
     return False
 
@@ -187,7 +188,7 @@ class DrawLists:
     same for instances drawn by the same batches and materials). ``instancing``: the
     passes draw a group's copies in one instanced draw (``render/instancing.py``)."""
     __slots__ = ("items", "writes_emission", "gbuffer_masks", "shadow_masks", "partial_mask",
-                 "signatures", "groups", "instancing")
+                 "signatures", "groups", "instancing", "writes_coat")
 
     def __init__(self, items, instancing=True):
         self.items = items
@@ -195,7 +196,8 @@ class DrawLists:
         numbers = {}
         self.groups = np.fromiter((numbers.setdefault(id(entry), len(numbers))
                                    for entry in items), dtype=np.int64, count=len(items))
-        self.writes_emission = _writes_emission(items)
+        self.writes_emission = _writes(items)
+        self.writes_coat = _writes(items, "writes_coat")
         self.gbuffer_masks = tuple(
             np.array([bool(getattr(entry, program.draws)) and
                       (program.tangents is None or entry.has_tangents == program.tangents)
@@ -389,7 +391,9 @@ def _material(cache, mesh, slot, white, default_material, memo=None):
         block = pack_material({
             "base_color": material.base_color, "emission": material.emission,
             "metallic": material.metallic, "roughness": material.roughness,
-            "specular_level": material.specular_level,
+            "specular_level": material.specular_level, "ior": material.ior,
+            "coat_weight": material.coat_weight, "coat_roughness": material.coat_roughness,
+            "coat_ior": material.coat_ior,
             "normal_strength": material.normal_strength,
             "alpha_cutoff": material.alpha_cutoff, "alpha_mode": material.alpha_mode,
             "shadow_alpha_mode": shadow_alpha,
@@ -408,7 +412,7 @@ def _material(cache, mesh, slot, white, default_material, memo=None):
     if held[2] != 'OPAQUE' and loaded[0]:
         shadow_key = None
     writes_emission = bool(loaded[2] or max(material.emission) > 0.0 or
-                           material.metallic > 0.0 or
+                           material.metallic > 0.0 or material.coat_weight > 0.0 or
                            (loaded[3] and material.metallic_channel >= 0))
     # What a G-buffer drawn with this material depends on; None when it reads an
     # image (painted or reloaded in place, it keeps its name and texture).
@@ -417,4 +421,4 @@ def _material(cache, mesh, slot, white, default_material, memo=None):
     return DrawMaterial(held[1], tuple(t or white for t in textures), any(loaded),
                         writes_emission, material.alpha_mode, material.shadow_mode,
                         material.backface_culling, material.backface_culling_shadow,
-                        shadow_key, gbuffer_key, material.name)
+                        shadow_key, gbuffer_key, material.name, material.coat_weight > 0.0)

@@ -1,9 +1,9 @@
 """The G-buffer pass: what the camera sees, per pixel, for the lighting pass to shade.
 
-Owns the G-buffer's targets (``GBuffer``): albedo+specular, normal+shininess, view depth
+Owns the G-buffer's targets (``GBuffer``): albedo+specular, normal+roughness, view depth
 (0 = background), the triangle's own normal+the object's Shadow Terminator Geometry Offset
-(facet), emission+metallic, depth and, for Cryptomatte passes only, each pixel's object,
-material and asset IDs (render/passes.py); materials are one uniform block each
+(facet), emission+metallic, coat, depth and, for Cryptomatte passes only, each pixel's
+object, material and asset IDs (render/passes.py); materials are one uniform block each
 (core/material_layout.py). World positions are rebuilt from view depth where needed
 (``core.camera.world_positions``). Also owns ``GBufferContents``: what a G-buffer drawn now
 would hold, so that one the targets already hold is not drawn again (F12 after a shadow or
@@ -33,6 +33,7 @@ class GBuffer(NamedTuple):
     facet: object
     depth: object
     framebuffer: object
+    coat: object = None
     ids: object = None      # Cryptomatte IDs (object, material, asset, 1), when asked for
 
 
@@ -70,30 +71,23 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     depth = targets.gbuffer_depth(width, height)
     emission = targets.texture("emission", (width, height), 'RGBA16F')
     facet = targets.texture("facet", (width, height), 'RGBA16F')
-    # Emission and metallic have a target only in frames that draw some: without it each
-    # fragment writes a sixth less (llvmpipe: ~15 % of the G-buffer), and the lighting pass
-    # reads an emission texture kept at zero.
+    coat = targets.texture("coat", (width, height), 'RGBA16F')
+    # Emission and metallic have a target only in frames that draw some, and the coat one
+    # only in frames with a coated material (which write emission's too: the outputs are
+    # positional): without one each fragment writes a sixth less (llvmpipe: ~15 % of the
+    # G-buffer), and the lighting pass reads a texture kept at zero.
+    colors = (albedo, normal, view_depth, facet)
+    if lists.writes_emission:
+        colors += (emission, coat) if lists.writes_coat else (emission,)
+    _keep_zero(targets, "zeroed_emission", emission, lists.writes_emission)
+    _keep_zero(targets, "zeroed_coat", coat, lists.writes_coat)
+    gbuffer_fb = targets.framebuffer(f"gbuffer_{len(colors)}", depth=depth, colors=colors)
     id_target = None
     if ids is not None:
-        # The IDs take the fifth slot, so emission is always drawn in these frames.
+        # Drawn by a second draw into the coat's slot (Blender's framebuffers take six
+        # colour targets): the first slots get the same values again.
         id_target = targets.texture("cryptomatte_ids", (width, height), 'RGBA32F')
-        gbuffer_fb = targets.framebuffer("gbuffer_ids", depth=depth,
-                                         colors=(albedo, normal, view_depth, facet, emission,
-                                                 id_target))
-        targets.zeroed_emission = None
-    elif lists.writes_emission:
-        gbuffer_fb = targets.framebuffer("gbuffer", depth=depth,
-                                         colors=(albedo, normal, view_depth, facet, emission))
-        targets.zeroed_emission = None
-    else:
-        gbuffer_fb = targets.framebuffer("gbuffer_no_emission", depth=depth,
-                                         colors=(albedo, normal, view_depth, facet))
-        if targets.zeroed_emission is not emission:
-            emission_fb = targets.framebuffer("emission_only", colors=(emission,))
-            with emission_fb.bind():
-                targets.call(emission_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
-            targets.zeroed_emission = emission
-    gbuffer = GBuffer(albedo, normal, view_depth, emission, facet, depth, gbuffer_fb,
+    gbuffer = GBuffer(albedo, normal, view_depth, emission, facet, depth, gbuffer_fb, coat,
                       id_target)
     # Near to far, so the early depth test skips the shading of hidden fragments.
     order = np.asarray(front_to_back(snap, instances.bounds_lo_hi), dtype=np.int64)
@@ -104,7 +98,7 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     terminator_offsets = np.fromiter((i.terminator_offset for i in snap.instances),
                                      dtype=np.float64, count=len(snap.instances))
     frame_cache = targets.frame_cache
-    drawn_into = (albedo, normal, view_depth, emission, depth, facet)
+    drawn_into = (albedo, normal, view_depth, emission, depth, facet, coat)
     contents = gbuffer_contents(targets, snap, cache, lists, order,
                                 instances.world_from_objects, terminator_offsets, frame_data)
     if ids is not None:
@@ -116,8 +110,17 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
         return gbuffer, True
     if targets.records:
         frame_cache.forget_gbuffer()
+    # Cryptomatte frames draw every copy on its own in both draws, so that the second
+    # draw's depths equal the first's and its depth test (LESS_EQUAL) passes where the
+    # first draw's surfaces are.
     _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuffer_fb,
-          width, height, ids)
+          width, height, instancing_allowed=ids is None)
+    if ids is not None:
+        ids_fb = targets.framebuffer("gbuffer_ids", depth=depth,
+                                     colors=(albedo, normal, view_depth, facet, emission,
+                                             id_target))
+        _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, ids_fb,
+              width, height, ids, instancing_allowed=False, clear=False)
     if contents is not None and targets.records:
         frame_cache.gbuffer = HeldGBuffer(drawn_into, contents)
     return gbuffer, False
@@ -143,8 +146,20 @@ def in_view(clip_from_world, bounds_lo_hi, rows, count):
     return inside
 
 
+def _keep_zero(targets, marker, texture, written):
+    """Clear ``texture`` to zero once when this frame does not write it (``marker``: the
+    ``Targets`` attribute naming the texture last cleared)."""
+    if written:
+        setattr(targets, marker, None)
+    elif getattr(targets, marker) is not texture:
+        fb = targets.framebuffer(f"{marker}_clear", colors=(texture,))
+        with fb.bind():
+            targets.call(fb.clear, color=(0.0, 0.0, 0.0, 0.0))
+        setattr(targets, marker, texture)
+
+
 def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuffer_fb,
-          width, height, ids=None):
+          width, height, ids=None, instancing_allowed=True, clear=True):
     import gpu
     items = lists.items
     mirrored = instances.mirrored
@@ -153,11 +168,13 @@ def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuff
         rows = order[drawn[order]]
         if len(rows):
             per_program.append((program, _program_runs(lists, rows, mirrored,
-                                                        terminator_offsets, ids is None)))
+                                                        terminator_offsets,
+                                                        instancing_allowed)))
     matrices = _instanced_matrices(instances, per_program)
     with gbuffer_fb.bind():
         gpu.state.viewport_set(0, 0, width, height)
-        targets.call(gbuffer_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+        if clear:
+            targets.call(gbuffer_fb.clear, color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
         gpu.state.depth_test_set('LESS_EQUAL')
         gpu.state.depth_mask_set(True)
         state = _DrawState()
@@ -263,7 +280,7 @@ def gbuffer_contents(targets, snap, cache, lists, order, world_from_objects,
     changed in place). In the viewport the camera is looked at first, so a redraw of a
     moving view pays for little else (its record holds only the camera, which the next
     redraw of that view completes)."""
-    camera = (programs_key(), lists.writes_emission,
+    camera = (programs_key(), lists.writes_emission, lists.writes_coat,
               FRAME_LAYOUT.field_bytes(frame_data, _GBUFFER_FRAME_FIELDS))
     held = targets.frame_cache.gbuffer
     # NOTE: the benchmark's Python-only redraw (``benchmark_skip_gpu_calls``) repeats the

@@ -32,6 +32,10 @@ class MaterialInfo:
     metallic: float = 0.0
     roughness: float = 0.5
     specular_level: float = 0.5
+    ior: float = 1.5                             # the specular layer's IOR
+    coat_weight: float = 0.0                     # Principled Coat (v2), clear tint
+    coat_roughness: float = 0.03
+    coat_ior: float = 1.5
     emission: tuple = (0.0, 0.0, 0.0)            # colour x strength, W/m^2/sr
     emission_image: object = None
     normal_image: object = None                  # tangent-space normal map (Non-Color)

@@ -78,6 +78,8 @@ def draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlus
         lighting.uniform_sampler("gbuffer_facet", gbuffer.facet)
         lighting.uniform_sampler("shadow_volume_count",
                                  targets.white() if volume_count is None else volume_count)
+        lighting.uniform_sampler("bsdf_lut", targets.bsdf_lut())
+        lighting.uniform_sampler("gbuffer_coat", gbuffer.coat)
         targets.call(targets.fullscreen_batch().draw, lighting)
         gpu.state.depth_test_set('NONE')
         if overlays and plan.frozen_camera is not None:

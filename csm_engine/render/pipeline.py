@@ -206,7 +206,8 @@ class Pipeline:
             gbuffer, gbuffer_kept, t = gbuffer_pass(t)
 
         if ids is not None and targets.records:
-            self.cryptomatte_samples.add(read_target(gbuffer.framebuffer, 5, width, height, 3),
+            ids_fb = targets.framebuffer("cryptomatte_ids_read", colors=(gbuffer.ids,))
+            self.cryptomatte_samples.add(read_target(ids_fb, 0, width, height, 3),
                                          sample_weight)
             self.cryptomatte_materials.update(ids.per_material)
         ambient_occlusion = draw_ambient_occlusion(targets, snap, frame_ubo, frame_data,

@@ -110,8 +110,10 @@ class Targets:
         self._framebuffers = {}
         self._fullscreen = None
         self._white = None
+        self._bsdf_lut = None
         self._ubo = None
         self.zeroed_emission = None     # the emission texture last cleared to zero
+        self.zeroed_coat = None         # the coat texture last cleared to zero
         # Wait for the GPU after each pass, so its time is its own (slower).
         self.profile = False
         # Benchmark only: every draw and clear is skipped (see ``call``), so a frame's
@@ -182,6 +184,17 @@ class Targets:
                 (1, 1), format='RGBA8',
                 data=gpu.types.Buffer('FLOAT', 4, [1.0, 1.0, 1.0, 1.0]))
         return self._white
+
+    def bsdf_lut(self):
+        """The Principled BSDF's tables (``core/bsdf_tables.py``) as one float texture."""
+        import gpu
+        if self._bsdf_lut is None:
+            from ..core import bsdf_tables
+            rows = bsdf_tables.lut_texture_rows()
+            self._bsdf_lut = gpu.types.GPUTexture(
+                (rows.shape[1], rows.shape[0]), format='RGBA32F',
+                data=gpu.types.Buffer('FLOAT', rows.size, rows.ravel().tolist()))
+        return self._bsdf_lut
 
     def call(self, call, *args, **kwargs):
         """Every draw and clear of a frame goes through here, so that the benchmark can

@@ -25,7 +25,7 @@ import os
 import re
 import sys
 
-from ..core import paths
+from ..core import bsdf_tables, paths
 from ..core.captured_output import CapturedOutput
 from ..core.frame_layout import FRAME_LAYOUT, glsl_defines
 from ..core.material_layout import MATERIAL_LAYOUT
@@ -55,7 +55,7 @@ PROGRAMS = {
         frame=True,
         material=True,      # MaterialData (core/material_layout.py) as "material"
         outputs=(("VEC4", "out_albedo"), ("VEC4", "out_normal"), ("FLOAT", "out_depth"),
-                 ("VEC4", "out_facet"), ("VEC4", "out_emission")),
+                 ("VEC4", "out_facet"), ("VEC4", "out_emission"), ("VEC4", "out_coat")),
     ),
     "shadow": dict(
         vertex="shadow_vert.glsl", fragment="shadow_frag.glsl",
@@ -161,9 +161,10 @@ for _name in [name for name in PROGRAMS if name.startswith(("gbuffer", "shadow")
         samplers=_spec["samplers"] + (("FLOAT_2D", "instance_matrices"),),
         defines=_spec.get("defines", ()) + (("INSTANCED", "1"),))
 
-# Final renders with Cryptomatte passes draw the G-buffer with these twins (CRYPTOMATTE): a
-# sixth target holds each pixel's object, material and asset IDs, set per draw (so such a
-# G-buffer draws each copy on its own: there are no instanced twins of these).
+# Final renders with Cryptomatte passes draw the G-buffer a second time with these twins
+# (CRYPTOMATTE): the sixth target, the coat's in the first draw, holds each pixel's object,
+# material and asset IDs, set per draw (so such a G-buffer draws each copy on its own:
+# there are no instanced twins of these).
 for _name in [name for name in PROGRAMS
               if name.startswith("gbuffer") and not name.endswith("_instanced")]:
     _spec = PROGRAMS[_name]
@@ -172,7 +173,8 @@ for _name in [name for name in PROGRAMS
         push=_spec["push"] + (("FLOAT", "cryptomatte_object"),
                                      ("FLOAT", "cryptomatte_material"),
                                      ("FLOAT", "cryptomatte_asset")),
-        outputs=_spec["outputs"] + (("VEC4", "out_ids"),),
+        outputs=tuple(o for o in _spec["outputs"] if o[1] != "out_coat") +
+        (("VEC4", "out_ids"),),
         defines=_spec.get("defines", ()) + (("CRYPTOMATTE", "1"),))
 
 # Screen-space ambient occlusion (ao_frag.glsl): the horizon search and a depth-aware blur,
@@ -190,7 +192,8 @@ PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_normal"),
                            defines=(("AO_BLUR", "1"),))
 PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),
                                      ("FLOAT_2D", "shadow_nearest_blocks"),
-                                     ("FLOAT_2D", "shadow_volume_count"))
+                                     ("FLOAT_2D", "shadow_volume_count"),
+                                     ("FLOAT_2D", "bsdf_lut"), ("FLOAT_2D", "gbuffer_coat"))
 # The Exact filter's shadow volumes counted per pixel (render/shadow_volumes.py).
 PROGRAMS["shadow_volume"] = dict(
     vertex="shadow_volume_vert.glsl", fragment="shadow_volume_frag.glsl",
@@ -356,7 +359,7 @@ def _error_lines(log):
     return errors
 
 
-def _build(program_name, spec, directory):
+def _build(program_name, spec, directory, host_defines=()):
     import gpu
 
     file_ids = {}
@@ -385,7 +388,8 @@ def _build(program_name, spec, directory):
         info.uniform_buf(1, MATERIAL_LAYOUT.type_name, "material")
     for slot, (kind, name) in enumerate(spec["outputs"]):
         info.fragment_out(slot, kind, name)
-    defines = [*glsl_defines(), *material_defines(), *spec.get("defines", ())]
+    defines = [*glsl_defines(), *material_defines(), *bsdf_tables.glsl_defines(),
+               *host_defines, *spec.get("defines", ())]
     for name, value in defines:
         info.define(name, value)
     info.vertex_source(vertex)
@@ -449,6 +453,10 @@ class ShaderLibrary:
     def __init__(self, directory=None, preferred_folder=None):
         self.directory = directory
         self.preferred_folder = preferred_folder
+        # ``#define``s of the host Blender, set by the Blender side (PRINCIPLED_V1: the
+        # Principled BSDF of Blender < 4.0); a compile-time switch, because llvmpipe runs
+        # both sides of an `if` on a uniform.
+        self.host_defines = ()
         self._shaders = None
         self.last_error = None
         self.generation = 0
@@ -493,7 +501,7 @@ class ShaderLibrary:
         try:
             for name, spec in PROGRAMS.items():
                 if not spec.get("on_demand"):
-                    compiled[name] = _build(name, spec, directory)
+                    compiled[name] = _build(name, spec, directory, self.host_defines)
         except BaseException:
             _RETIRED.append(compiled)      # the programs that did compile, freed later
             raise
@@ -526,7 +534,8 @@ class ShaderLibrary:
         shader = self._shaders.get(name)
         if shader is None:
             # An on-demand program (see PROGRAMS), from the folder the others came from.
-            shader = self._shaders[name] = _build(name, PROGRAMS[name], self.compiled_from)
+            shader = self._shaders[name] = _build(name, PROGRAMS[name], self.compiled_from,
+                                                  self.host_defines)
         return shader
 
     def release(self):

@@ -30,6 +30,7 @@ MEMOS = {
     ("csm_engine.core.cascades.stabilization", "_view_space_sphere"),
     ("csm_engine.core.cascades.fitting", "_view_slice_corners"),
     ("csm_engine.core.cascades.receivers", "_block_corners"),
+    ("csm_engine.core.bsdf_tables", "_tables"),
 }
 
 MUTABLE_CONTAINERS = (dict, list, set, bytearray, collections.deque)

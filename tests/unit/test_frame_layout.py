@@ -163,7 +163,8 @@ def test_frame_layout_fits_a_uniform_block_and_uses_the_limits():
     assert counts == {"cascades": frame_layout.MAX_CASCADES,
                       "shadow_tiles": frame_layout.MAX_SHADOW_TILES,
                       "point_lights": frame_layout.MAX_POINT_LIGHTS,
-                      "spot_lights": frame_layout.MAX_SPOT_LIGHTS}
+                      "spot_lights": frame_layout.MAX_SPOT_LIGHTS,
+                      "world_sh": 9}
 
 
 # ---- GLSL uses only what the table and glsl_defines provide ------------------------------
@@ -244,7 +245,7 @@ def _snapshot_and_plan():
         sun=Sun(to_light=np.array([0.0, 0.6, 0.8]), color=np.array([2.0, 2.0, 2.0]),
                 casts_shadow=True),
         points=[PointLight(np.array([1.0, 1.0, 1.0]), np.array([0.5, 0.25, 0.125]), 10.0)],
-        spots=[spot, spot], ambient=np.array([0.1, 0.2, 0.3]),
+        spots=[spot, spot], ambient=np.array([0.1, 0.2, 0.3]), world_sh=None,
         background=np.array([0.4, 0.5, 0.6]), film_transparent=True, sample_index=0)
     tiles = [ShadowTile(rng.normal(size=(4, 4)), 1024 >> i, 0.01 * (i + 1), 1.0 + i, 50.0 + i,
                         False, origin=(1024 * i, 0), display_near=2.0 + i) for i in range(2)]
@@ -261,6 +262,10 @@ def test_pack_frame_fills_the_frame_block_by_name():
     frame = FRAME_LAYOUT.unpack(pack_frame(snap, plan))
     assert frame["is_perspective"] == 1 and frame["viewport_size"].tolist() == [640, 360]
     assert frame["background_alpha"] == 0.0, "film transparent"
+    # No environment: the World's harmonics are the uniform ambient colour's.
+    np.testing.assert_allclose(frame["world_sh"][0][:3],
+                               np.array([0.1, 0.2, 0.3]) * 4.0 * np.pi * 0.282095, rtol=1e-6)
+    assert not np.any(frame["world_sh"][1:])
     assert frame["has_sun"] == 1 and frame["sun_casts_shadow"] == 1
     assert frame["cascade_count"] == 2 and frame["shadow_distance"] == 40.0
     assert frame["fade_start_depth"] == 30.0

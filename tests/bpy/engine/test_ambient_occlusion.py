@@ -24,11 +24,17 @@ ALBEDO = 0.8                 # Blender's default material base colour
 
 @pytest.fixture
 def box_on_floor(empty_scene):
-    """A 2 m box on a 30 m floor, a grey World and no lamp; AO on, distance 1 m."""
+    """A 2 m box on a 30 m floor, both diffuse (Specular IOR Level 0: their World light is
+    exactly World x albedo from every view), a grey World and no lamp; AO on, distance
+    1 m."""
     scene = empty_scene
     set_world_color(scene, (WORLD, WORLD, WORLD))
-    add_ground(30)
-    add_box((0, 0, 1), (1, 1, 1))
+    floor = principled("diffuse", (ALBEDO, ALBEDO, ALBEDO), 0.5)
+    bsdf = next(n for n in floor.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
+    next(bsdf.inputs[n] for n in ("Specular IOR Level", "Specular")
+         if bsdf.inputs.get(n)).default_value = 0.0
+    add_ground(30).data.materials.append(floor)
+    add_box((0, 0, 1), (1, 1, 1)).data.materials.append(floor)
     add_camera(scene, (6, -7, 5), (0, 0, 0.3))
     scene.csm.ambient_occlusion = True
     scene.csm.ao_distance = 1.0

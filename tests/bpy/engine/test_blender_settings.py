@@ -61,12 +61,20 @@ def test_an_object_with_shadow_visibility_off_casts_no_shadow(box_on_ground):
     assert images["aux"][..., 0][ground].min() > 0.98
 
 
-def test_an_environment_texture_lights_as_its_average(empty_scene):
-    """No lights: a white plane shows albedo x the environment's mean radiance over the
-    sphere. Upper half red 2.0 and lower half blue 1.0 of an equirectangular map cover equal
-    solid angles, so the mean is (1.0, 0, 0.5)."""
+def test_an_environment_texture_lights_by_the_irradiance_of_the_normal(empty_scene):
+    """No lights: a diffuse plane facing up shows albedo x the irradiance / pi the
+    environment sends it. Upper half red 2.0 and lower half blue 1.0 of an
+    equirectangular map: the plane sees the red half only, (2.0, 0, 0) (the second band of
+    the spherical harmonics gives a hemisphere's step exactly here), not the mean over the
+    sphere (1.0, 0, 0.5); the background keeps the mean."""
     scene = empty_scene
-    add_ground(20)
+    ground = add_ground(20)
+    material = bpy.data.materials.new("diffuse")
+    material.use_nodes = True
+    bsdf = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
+    next(bsdf.inputs[n] for n in ("Specular IOR Level", "Specular")
+         if bsdf.inputs.get(n)).default_value = 0.0
+    ground.data.materials.append(material)
     camera = add_camera(scene, (0, 0, 10), (0, 0, 0))
     camera.data.type = 'ORTHO'
     camera.data.ortho_scale = 4.0
@@ -86,8 +94,8 @@ def test_an_environment_texture_lights_as_its_average(empty_scene):
     scene.world = world
     scene.csm.render_samples = 1
     color = render_scene(scene, 32, 32)["combined"][16, 16, :3]
-    albedo = 0.8                              # the default material's base colour
-    assert color == pytest.approx(np.array([1.0, 0.0, 0.5]) * 0.5 * albedo, abs=0.01)
+    albedo = 0.8                              # the Principled BSDF's default base colour
+    assert color == pytest.approx(np.array([2.0, 0.0, 0.0]) * 0.5 * albedo, abs=0.01)
 
 
 @pytest.mark.parametrize("crop", [False, True])

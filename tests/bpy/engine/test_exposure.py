@@ -19,7 +19,7 @@ from tests.bpy.scenes import (add_box, add_camera, add_ground, add_light, add_su
                               render_eevee, set_world_color)
 
 WIDTH, HEIGHT = 160, 120
-TOLERANCE = 0.10            # CSM's mean brightness within 10% of EEVEE's
+TOLERANCE = 0.03            # CSM's mean brightness within 3% of EEVEE's
 LUMA = np.array([0.2126, 0.7152, 0.0722])
 
 

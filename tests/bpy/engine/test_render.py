@@ -124,14 +124,21 @@ def test_film_transparent_background_has_zero_alpha(empty_scene):
 
 def test_world_colour_is_background_and_ambient(empty_scene):
     scene = empty_scene
-    add_ground(20)
+    ground = add_ground(20)
+    diffuse = bpy.data.materials.new("diffuse")
+    diffuse.use_nodes = True
+    bsdf = next(n for n in diffuse.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
+    next(bsdf.inputs[n] for n in ("Specular IOR Level", "Specular")
+         if bsdf.inputs.get(n)).default_value = 0.0
+    ground.data.materials.append(diffuse)
     set_world_color(scene, (0.2, 0.1, 0.05))
     add_camera(scene, (0, -8, 3), (0, 0, 0))
     images = render_scene(scene, 64, 64)
     color, covered = images["combined"], images["aux"][..., 3] > 0.5
     assert not covered[0, 0] and covered[63, 32]
     assert np.allclose(color[0, 0, :3], (0.2, 0.1, 0.05), atol=1e-4)    # sky
-    # No lamp: the ground shows only ambient = World colour x albedo 0.8.
+    # No lamp: the diffuse ground (Specular IOR Level 0) shows only ambient = World
+    # colour x albedo 0.8.
     assert np.allclose(color[63, 32, :3], np.array((0.2, 0.1, 0.05)) * 0.8, atol=1e-3)
 
 
