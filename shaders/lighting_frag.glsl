@@ -208,16 +208,6 @@ void add_spot_lights(Surface s, inout vec3 color)
   }
 }
 
-/* A light pass: reflected light / the layer's colour where that is above zero, as
- * Blender defines Diffuse and Glossy Light (so light x colour gives the reflected light
- * back); 0 elsewhere, where the layer reflects nothing. */
-vec3 light_pass(vec3 reflected, vec3 layer_color)
-{
-  return vec3(layer_color.r > 0.0 ? reflected.r / layer_color.r : 0.0,
-              layer_color.g > 0.0 ? reflected.g / layer_color.g : 0.0,
-              layer_color.b > 0.0 ? reflected.b / layer_color.b : 0.0);
-}
-
 /* The passes of surface s, whose World light reached it by `ambient_visibility` (its AO),
  * the World's share split by ambient_light_split. Nothing outside PASSES programs. */
 void write_surface_passes(Surface s, float ambient_visibility)
@@ -230,10 +220,11 @@ void write_surface_passes(Surface s, float ambient_visibility)
   ambient_light_split(s, ambient_visibility, world_diffuse, world_specular);
   /* Laid out as render/passes.py's LIGHTING_PASS_CHANNELS says: AO and Emission in the
    * alpha channels. */
-  out_diffuse_light = vec4(light_pass(reflected_diffuse + world_diffuse, diffuse_color),
-                           ambient_visibility);
-  out_specular_light = vec4(light_pass(reflected_specular + world_specular, specular_color),
-                            s.emission.r);
+  /* The light each layer reflects, not yet divided by its colour: samples average these
+   * (and the colours) linearly, so the Light passes (render/passes.py divides once, at the
+   * end) times the averaged colours add up to the averaged Combined. */
+  out_diffuse_light = vec4(reflected_diffuse + world_diffuse, ambient_visibility);
+  out_specular_light = vec4(reflected_specular + world_specular, s.emission.r);
   out_diffuse_color = vec4(diffuse_color, s.emission.g);
   out_specular_color = vec4(specular_color, s.emission.b);
 #endif

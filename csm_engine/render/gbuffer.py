@@ -116,6 +116,10 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuffer_fb,
           width, height, instancing_allowed=ids is None)
     if ids is not None:
+        # Background pixels keep no IDs of an earlier sample.
+        clear_fb = targets.framebuffer("gbuffer_ids_clear", colors=(id_target,))
+        with clear_fb.bind():
+            targets.call(clear_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
         ids_fb = targets.framebuffer("gbuffer_ids", depth=depth,
                                      colors=(albedo, normal, view_depth, facet, emission,
                                              id_target))

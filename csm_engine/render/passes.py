@@ -78,7 +78,10 @@ def lighting_pass_textures(targets, width, height):
 
 def split_lighting_passes(images):
     """name -> (H, W, C) of the light and colour passes in ``images`` (as read back under
-    their target names)."""
+    their target names). The targets hold each layer's reflected light, which samples
+    average as they average the colours; a Light pass is that divided by its Color pass,
+    as Blender defines Diffuse and Glossy Light (so light x colour gives the averaged
+    reflected light back), and 0 where the layer reflects nothing."""
     if any(images.get(target) is None for target in LIGHTING_PASS_TARGETS):
         return {}
     out = {}
@@ -91,6 +94,11 @@ def split_lighting_passes(images):
         else:
             out[name] = np.stack([images[LIGHTING_PASS_TARGETS[target]][..., channel]
                                   for target, channel in channels], axis=-1)
+    for light, color in (("Diffuse Direct", "Diffuse Color"),
+                         ("Glossy Direct", "Glossy Color")):
+        reflected, layer = out[light], out[color]
+        out[light] = np.divide(reflected, layer, out=np.zeros_like(reflected),
+                               where=layer > 0.0)
     return out
 
 
