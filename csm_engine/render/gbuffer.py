@@ -58,15 +58,18 @@ def programs_key():
 
 
 def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, width,
-                 height, ids=None):
+                 height, ids=None, precise_normals=False):
     """Draw the camera's view of ``lists`` (``DrawLists``) at ``instances``' matrices
     (``InstanceArrays``) into the G-buffer targets, near to far, with the frame block
     ``frame_ubo`` (``frame_data`` as numpy). Keeps the targets as they are when they hold
     what it would draw (the frame cache's ``gbuffer``). ``ids`` (``passes.DrawIds``): also
     write the Cryptomatte IDs, with the CRYPTOMATTE programs into one more target (such a
-    G-buffer is always drawn, never kept). Returns (``GBuffer``, whether it was kept)."""
+    G-buffer is always drawn, never kept). ``precise_normals``: a float32 normal target (the
+Normal pass is read from it) instead of half floats. Returns (``GBuffer``, whether it was
+kept)."""
     albedo = targets.texture("albedo", (width, height), 'RGBA16F')
-    normal = targets.texture("normal", (width, height), 'RGBA16F')
+    normal = targets.texture("normal", (width, height),
+                             'RGBA32F' if precise_normals else 'RGBA16F')
     view_depth = targets.texture("view_depth", (width, height), 'R32F')
     depth = targets.gbuffer_depth(width, height)
     emission = targets.texture("emission", (width, height), 'RGBA16F')

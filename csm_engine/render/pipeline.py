@@ -185,8 +185,9 @@ class Pipeline:
             if passes is not None and passes.cryptomatte else None
 
         def gbuffer_pass(t):
-            gbuffer, kept = draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo,
-                                         frame_data, width, height, ids)
+            gbuffer, kept = draw_gbuffer(
+                targets, snap, cache, lists, instances, frame_ubo, frame_data, width, height,
+                ids, precise_normals=passes is not None and "Normal" in passes.names)
             return gbuffer, kept, self._sync(gbuffer.framebuffer, "gbuffer", t)
 
         t = time.perf_counter()
