@@ -149,7 +149,7 @@ class CSMLightControls(bpy.types.PropertyGroup):
 
     sun_azimuth: FloatProperty(
         name="Sun Azimuth",
-        description="Compass direction towards the sun, an angle from +X toward +Y "
+        description="Compass direction towards the sun, in degrees from +X toward +Y "
                     "(0\u00b0 = sun in +X, 90\u00b0 = sun in +Y). Rotates the scene's active "
                     "Sun (the selected one, else the newest imported scene's)",
         get=_get_azimuth, set=_set_azimuth,
@@ -157,7 +157,7 @@ class CSMLightControls(bpy.types.PropertyGroup):
         subtype='ANGLE', unit='ROTATION', options=set())
     sun_elevation: FloatProperty(
         name="Sun Elevation",
-        description="Height of the sun above the horizon, an angle (0\u00b0 = grazing "
+        description="Height of the sun above the horizon, in degrees (0\u00b0 = grazing "
                     "light, 90\u00b0 = straight overhead). Rotates the scene's active Sun",
         get=_get_elevation, set=_set_elevation,
         min=-math.pi / 2, max=math.pi / 2, step=100, precision=1,
