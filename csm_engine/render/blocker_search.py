@@ -10,8 +10,8 @@ many times wider than its own cone; its few taps then missed the thin sliver of 
 at the lit side of the penumbra, which came out too narrow.
 """
 
-from . import shaders
 from .resources import NearestBlocks
+from .visible_depth import reduce_min_max
 
 # Texels on a side of a block: three 4x4 steps. The soft filter's widest search
 # (SOFT_RADIUS_LIMIT_TEXELS, 48) must fit within one block on each side of a point's own.
@@ -24,28 +24,14 @@ def nearest_blocks(targets, atlas, tiles_drawn):
     RGBA32F texture (nearest window depth in R; 1 where nothing was drawn): the one held
     when no tile was drawn since it was reduced (``tiles_drawn``: tiles drawn this frame),
     else reduced now."""
-    import gpu
     frame_cache = targets.frame_cache
     held = frame_cache.nearest_blocks
     if tiles_drawn == 0 and held is not None and held.atlas is atlas.depth:
         return held.texture
     frame_cache.nearest_blocks = None
-    source = atlas.depth
-    size = (source.width, source.height)
-    shader = shaders.LIBRARY.get("depth_range")
-    for step in range(_STEPS):
-        size = (max((size[0] + 3) // 4, 1), max((size[1] + 3) // 4, 1))
-        target = targets.texture(f"atlas_nearest_{step}", size, 'RGBA32F')
-        fb = targets.framebuffer(f"atlas_nearest_{step}", colors=(target,))
-        with fb.bind():
-            gpu.state.viewport_set(0, 0, size[0], size[1])
-            gpu.state.depth_test_set('NONE')
-            gpu.state.blend_set('NONE')
-            shader.bind()
-            shader.uniform_int("source_is_view_depth", 0)
-            shader.uniform_sampler("source", source)
-            targets.call(targets.fullscreen_batch().draw, shader)
-        source = target
+    depth = atlas.depth
+    source, _fb = reduce_min_max(targets, "atlas_nearest", depth, (depth.width, depth.height),
+                                 _STEPS)
     if targets.records:
         frame_cache.nearest_blocks = NearestBlocks(atlas.depth, source)
     return source

@@ -3,7 +3,9 @@
 Owns ``VisibleDepth``: the G-buffer's view depth reduced on the GPU to the nearest and
 farthest depth per 16x16 block (two 4x4 min/max steps, ``depth_range_frag.glsl``) and read
 back; the CPU fits the cascades to those blocks (``core.shadow_plan``). Blocks of a kept
-G-buffer are kept with it (the frame cache's ``depth_blocks``).
+G-buffer are kept with it (the frame cache's ``depth_blocks``). Also owns
+``reduce_min_max``, the 4x4 min/max steps on the GPU, which ``blocker_search`` runs over
+the shadow atlas too.
 """
 
 import numpy as np
@@ -38,22 +40,9 @@ class VisibleDepth:
         on the GPU and one read-back of the small result
         (``shadow_plan.depth_blocks_from_reduction``)."""
         import gpu
-        source, is_view_depth = view_depth, 1
-        size = (width, height)
-        shader = shaders.LIBRARY.get("depth_range")
-        for level in range(2):
-            size = (max((size[0] + 3) // 4, 1), max((size[1] + 3) // 4, 1))
-            target = targets.texture(f"depth_range_{level}", size, 'RGBA32F')
-            fb = targets.framebuffer(f"depth_range_{level}", colors=(target,))
-            with fb.bind():
-                gpu.state.viewport_set(0, 0, size[0], size[1])
-                gpu.state.depth_test_set('NONE')
-                gpu.state.blend_set('NONE')
-                shader.bind()
-                shader.uniform_int("source_is_view_depth", is_view_depth)
-                shader.uniform_sampler("source", source)
-                targets.call(targets.fullscreen_batch().draw, shader)
-            source, is_view_depth = target, 0
+        target, fb = reduce_min_max(targets, "depth_range", view_depth, (width, height), 2,
+                                    source_is_view_depth=True)
+        size = (target.width, target.height)
         if not targets.records:
             # Benchmark only (nothing was drawn to reduce): the last real frame's reduction
             # stands in, so the frame plans, and keeps shadow tiles, as a real one does.
@@ -68,3 +57,28 @@ class VisibleDepth:
                 size[1], size[0], 4)[..., :2]
             self._depth_pairs = pairs
         return depth_blocks_from_reduction(pairs, self.DEPTH_BLOCK_PIXELS, width, height)
+
+
+def reduce_min_max(targets, name, source, size, steps, source_is_view_depth=False):
+    """``steps`` 4x4 min/max reductions of ``source`` (``size`` texels) on the GPU
+    (``depth_range_frag.glsl``): per output texel the nearest (R) and farthest (G) value of
+    the 4^steps x 4^steps block it covers. ``source_is_view_depth``: the G-buffer's view
+    depth, whose 0 (background) is left out. Returns the last RGBA32F target and its
+    framebuffer (textures named ``<name>_<step>``)."""
+    import gpu
+    shader = shaders.LIBRARY.get("depth_range")
+    is_view_depth = 1 if source_is_view_depth else 0
+    for step in range(steps):
+        size = (max((size[0] + 3) // 4, 1), max((size[1] + 3) // 4, 1))
+        target = targets.texture(f"{name}_{step}", size, 'RGBA32F')
+        fb = targets.framebuffer(f"{name}_{step}", colors=(target,))
+        with fb.bind():
+            gpu.state.viewport_set(0, 0, size[0], size[1])
+            gpu.state.depth_test_set('NONE')
+            gpu.state.blend_set('NONE')
+            shader.bind()
+            shader.uniform_int("source_is_view_depth", is_view_depth)
+            shader.uniform_sampler("source", source)
+            targets.call(targets.fullscreen_batch().draw, shader)
+        source, is_view_depth = target, 0
+    return source, fb
