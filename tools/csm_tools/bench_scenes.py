@@ -36,6 +36,21 @@ def add_ground(size, z=0.0):
     return ground
 
 
+def add_camera(scene, location, target, lens=35.0):
+    """A camera at ``location`` looking at ``target`` (world points), up +Z, clip end 500;
+    made the scene's camera."""
+    import bpy
+    from mathutils import Vector
+    bpy.ops.object.camera_add(location=location)
+    camera = bpy.context.object
+    camera.rotation_euler = (Vector(target) - Vector(location)).to_track_quat(
+        '-Z', 'Y').to_euler()
+    camera.data.lens = lens
+    camera.data.clip_end = 500.0
+    scene.camera = camera
+    return camera
+
+
 def add_world(scene):
     """The dim blue-grey world every benchmark scene has (ambient light for CSM)."""
     import bpy

@@ -28,7 +28,6 @@ metals, coat, sheen, emission, and the bundled textured glTF).
 
 import argparse
 import datetime
-import math
 import os
 import platform
 import tempfile
@@ -40,6 +39,7 @@ from csm_engine.blender.cli import (CLIError, EXIT_RENDER, EXIT_SCENE, open_scen
                                     parse_resolution, run_reporting_errors)
 
 from . import report_io
+from .bench_scenes import add_camera
 from .ground_truth import (_isolated, _render_csm, _render_exr, _set_sun_shadow,
                            _setup_cycles, _setup_eevee, eevee_engine_id)
 
@@ -91,19 +91,6 @@ def _sun(direction, energy=3.0):
     return sun
 
 
-def _camera(scene, location, target, lens=35.0):
-    import bpy
-    from mathutils import Vector
-    bpy.ops.object.camera_add(location=location)
-    camera = bpy.context.object
-    camera.rotation_euler = (Vector(target) - Vector(location)).to_track_quat(
-        '-Z', 'Y').to_euler()
-    camera.data.lens = lens
-    camera.data.clip_end = 500.0
-    scene.camera = camera
-    return camera
-
-
 def _sphere(location, radius, material):
     import bpy
     bpy.ops.mesh.primitive_uv_sphere_add(radius=radius, location=location, segments=64,
@@ -126,7 +113,7 @@ def build_scene(name):
                                             scale=(1.0, 1.0, 4.0))
             _assign(pillar)
         _sun((0.5, 0.3, 0.6))
-        _camera(scene, (-2.0, -6.0, 1.6), (2.0, 40.0, 0.0), lens=28.0)
+        add_camera(scene, (-2.0, -6.0, 1.6), (2.0, 40.0, 0.0), lens=28.0)
     elif name == "suzannes":
         bpy.ops.mesh.primitive_plane_add(size=30.0)
         _assign(ground)
@@ -139,7 +126,7 @@ def build_scene(name):
             modifier.levels = modifier.render_levels = 2
             _assign(_principled(f"suzanne {i}", colours[i % 4], 0.15 + 0.25 * (i // 4)))
         _sun((-0.4, -0.6, 0.7))
-        _camera(scene, (9.0, -12.0, 7.0), (0.0, 0.0, 0.5))
+        add_camera(scene, (9.0, -12.0, 7.0), (0.0, 0.0, 0.5))
     elif name == "sphere_row":
         bpy.ops.mesh.primitive_plane_add(size=40.0)
         _assign(ground)
@@ -150,7 +137,7 @@ def build_scene(name):
             _sphere((2.4 * i - 2.4, 3.0, 1.0), 1.0,
                     _principled(f"dielectric {i}", (0.2, 0.3, 0.7), roughness))
         _sun((0.3, -0.5, 0.6))
-        _camera(scene, (0.0, -9.0, 4.0), (0.0, 1.5, 0.8))
+        add_camera(scene, (0.0, -9.0, 4.0), (0.0, 1.5, 0.8))
     elif name == "sweep_dielectrics":
         bpy.ops.mesh.primitive_plane_add(size=200.0, location=(0.0, 80.0, 0.0))
         _assign(_principled("ground white", (0.8, 0.8, 0.8), 0.3))
@@ -158,7 +145,7 @@ def build_scene(name):
             _sphere((1.8 * i - 4.5, 2.0, 0.8), 0.8,
                     _principled(f"dielectric r{roughness}", (0.8, 0.8, 0.8), roughness))
         _sun((-0.2, 0.8, 0.5))
-        _camera(scene, (0.0, -5.0, 1.2), (0.0, 6.0, 0.2), lens=24.0)
+        add_camera(scene, (0.0, -5.0, 1.2), (0.0, 6.0, 0.2), lens=24.0)
     elif name == "sweep_materials":
         bpy.ops.mesh.primitive_plane_add(size=40.0)
         _assign(ground)
@@ -186,7 +173,7 @@ def build_scene(name):
         for i, material in enumerate(materials):
             _sphere((2.2 * (i % 3) - 2.2, 2.4 * (i // 3), 0.9), 0.9, material)
         _sun((0.3, -0.4, 0.8))
-        _camera(scene, (0.0, -8.0, 5.0), (0.0, 1.2, 0.6))
+        add_camera(scene, (0.0, -8.0, 5.0), (0.0, 1.2, 0.6))
     elif name == "textured_gltf":
         from csm_engine.core import paths
         path = os.path.join(paths.data_dir(), "gltf", "voxel_landscape",
@@ -200,7 +187,7 @@ def build_scene(name):
                 lo, hi = np.minimum(lo, corners.min(0)), np.maximum(hi, corners.max(0))
         centre, size = (lo + hi) / 2, float(np.max(hi - lo))
         _sun((0.4, -0.3, 0.7))
-        _camera(scene, tuple(centre + np.array([0.6, -0.9, 0.5]) * size), tuple(centre))
+        add_camera(scene, tuple(centre + np.array([0.6, -0.9, 0.5]) * size), tuple(centre))
     else:
         raise CLIError(f"unknown scene '{name}' (known: {', '.join(ALL_SCENES)})",
                        EXIT_SCENE)
