@@ -24,7 +24,7 @@
 
 #define AO_PI 3.14159265358979
 #define AO_HALF_PI 1.57079632679490
-#define AO_SLICES 2
+#define AO_SLICES 1
 #define AO_STEPS 8             /* per side of a slice */
 #define AO_MAX_RADIUS 256.0    /* pixels: a nearby occluder farther on screen is missed */
 
@@ -53,44 +53,22 @@ float ao_bayer4(ivec2 p)
   return float(b);
 }
 
-/* The cosine of the highest horizon seen walking from p along dir (full-res pixels),
- * starting from the tangent plane's horizon low_cos. */
-float ao_horizon(ivec2 p, vec3 center, vec3 n, vec3 v, vec2 dir, float radius_px,
-                 float jitter, float low_cos)
+/* acos on [-1, 1] to ~7e-5 rad (Abramowitz & Stegun 4.4.45): a few multiplies and a
+ * square root where the built-in is a long polynomial with range reduction. */
+float ao_acos(float x)
 {
-  ivec2 size = ivec2(frame.viewport_size);
-  float horizon_cos = low_cos;
-  for (int k = 0; k < AO_STEPS; k++) {
-    /* Even spacing: the highest horizon within the distance is often near its end (a
-     * wall's points at exactly the distance), so the far steps matter as much as the near. */
-    float s = (float(k) + jitter) / float(AO_STEPS);
-    float t = max(s * radius_px, 1.5 + float(k));
-    if (t > radius_px + 1.5) {
-      break;
-    }
-    ivec2 q = p + ivec2(round(dir * t));
-    if (any(lessThan(q, ivec2(0))) || any(greaterThanEqual(q, size))) {
-      break;
-    }
-    float d = texelFetch(gbuffer_depth, q, 0).r;
-    if (d <= 0.0) {
-      continue;   /* background occludes nothing */
-    }
-    vec3 delta = ao_view_position(q, d) - center;
-    float dist = length(delta);
-    /* NOTE: a sample is the centre of the pixel nearest the step, a little off the slice
-     * plane; on a flat surface that alone reads as a horizon just above the tangent plane
-     * (a plane would occlude itself by ~2 %, most at grazing views). Points within ~1
-     * degree of the tangent plane therefore never occlude; their cosine weight is ~0. */
-    if (dot(delta, n) <= 0.02 * dist) {
-      continue;
-    }
-    /* Cycles counts a hit within the distance only; the last 5 % fades, so the border of
-     * the occluded band does not band with the step pattern. */
-    float weight = clamp((frame.ao_distance - dist) / (0.05 * frame.ao_distance), 0.0, 1.0);
-    horizon_cos = max(horizon_cos, mix(low_cos, dot(delta, v) / dist, weight));
-  }
-  return horizon_cos;
+  float a = abs(x);
+  float r = sqrt(1.0 - a) * (1.5707288 + a * (-0.2121144 + a * (0.0742610 - 0.0187293 * a)));
+  return x >= 0.0 ? r : AO_PI - r;
+}
+
+/* The slice's share of the cosine-weighted visible arc on one side: horizon angle h (its
+ * cosine c and sine s), the projected normal's angle n (cos_n, sin_n); GTAO's closed form
+ * 0.25 (cos n + 2 h sin n - cos(2h - n)) without trigonometric calls. */
+float ao_arc(float h, float c, float s, float cos_n, float sin_n)
+{
+  float cos_2h_n = (2.0 * c * c - 1.0) * cos_n + 2.0 * s * c * sin_n;
+  return cos_n + 2.0 * h * sin_n - cos_2h_n;
 }
 
 void main()
@@ -100,101 +78,145 @@ void main()
   ivec2 p = min(ao_pixel * 2, size - 1);
   float depth = texelFetch(gbuffer_depth, p, 0).r;
   if (depth <= 0.0) {
-    out_ao_depth = vec2(1.0, 0.0);
+    out_ao_sums = vec4(1.0, 1.0, 0.0, 0.0);
     return;
   }
   float radius_px = frame.ao_distance / ao_pixel_footprint(depth);
   if (radius_px < 1.5) {
-    out_ao_depth = vec2(1.0, depth);   /* everything within the distance is inside this pixel */
+    out_ao_sums = vec4(1.0, 1.0, depth, 0.0);   /* everything within the distance is inside this pixel */
     return;
   }
   radius_px = min(radius_px, AO_MAX_RADIUS);
   vec3 center = ao_view_position(p, depth);
   vec3 n = normalize(mat3(frame.view_from_world) * texelFetch(gbuffer_normal, p, 0).xyz);
   vec3 v = frame.is_perspective != 0 ? normalize(-center) : vec3(0.0, 0.0, 1.0);
+  /* View-space xy of full-resolution pixel q at depth d: (q * ray_scale + ray_offset) * d
+   * (times 1 in an orthographic view), as ao_view_position. */
+  vec2 ray_scale = 2.0 / frame.viewport_size * frame.ao_view_ray.xy;
+  vec2 ray_offset = (1.0 / frame.viewport_size - 1.0) * frame.ao_view_ray.xy +
+                    frame.ao_view_ray.zw;
+  float perspective = frame.is_perspective != 0 ? 1.0 : 0.0;
+  float fade = 1.0 / (0.05 * frame.ao_distance);
 
   float rotation = (ao_bayer4(ao_pixel) + 0.5) / 16.0;
-  /* Interleaved gradient noise (Jimenez 2014) for the step offsets, independent of the
-   * rotation pattern. */
   float jitter = fract(52.9829189 * fract(dot(vec2(ao_pixel), vec2(0.06711056, 0.00583715))));
+  float phi0 = rotation * AO_PI / float(AO_SLICES);
+  vec2 dir0 = vec2(cos(phi0), sin(phi0));
+  float turn = AO_PI / float(AO_SLICES);
+  mat2 next_slice = mat2(cos(turn), sin(turn), -sin(turn), cos(turn));
 
-  /* Each slice's visible arc is divided by its arc with nothing above the tangent plane
-   * (its share of the cosine-weighted hemisphere), so a pixel with nothing nearby is
-   * exactly 1 whatever its few slice directions; averaged over many slices the two agree. */
   float visibility = 0.0;
   float open_sky = 0.0;
+  vec2 dir = dir0;
   for (int slice = 0; slice < AO_SLICES; slice++) {
-    float phi = (float(slice) + rotation) * AO_PI / float(AO_SLICES);
-    vec2 dir = vec2(cos(phi), sin(phi));
-    /* With square pixels, a screen direction is the same direction in view space, and the
-     * plane through the eye, the pixel and that direction is the slice. */
     vec3 dir_v = vec3(dir, 0.0);
     vec3 ortho = dir_v - dot(dir_v, v) * v;
     vec3 axis = normalize(cross(ortho, v));
     vec3 n_proj = n - axis * dot(n, axis);
-    float n_proj_len = length(n_proj);
-    if (n_proj_len < 1e-6) {
-      continue;   /* the slice holds no part of the hemisphere's weight */
-    }
+    float n_proj_len = max(length(n_proj), 1e-6);
     float cos_n = clamp(dot(n_proj, v) / n_proj_len, 0.0, 1.0);
-    float angle_n = (dot(ortho, n_proj) < 0.0 ? -1.0 : 1.0) * acos(cos_n);
-    float cos_plus = ao_horizon(p, center, n, v, dir, radius_px, jitter,
-                                cos(angle_n + AO_HALF_PI));
-    float cos_minus = ao_horizon(p, center, n, v, -dir, radius_px, jitter,
-                                 cos(angle_n - AO_HALF_PI));
-    float h_plus = acos(clamp(cos_plus, -1.0, 1.0));
-    float h_minus = -acos(clamp(cos_minus, -1.0, 1.0));
-    h_plus = angle_n + min(h_plus - angle_n, AO_HALF_PI);
-    h_minus = angle_n + max(h_minus - angle_n, -AO_HALF_PI);
-    float sin_n = sin(angle_n);
-    float arc_plus = cos_n + 2.0 * h_plus * sin_n - cos(2.0 * h_plus - angle_n);
-    float arc_minus = cos_n + 2.0 * h_minus * sin_n - cos(2.0 * h_minus - angle_n);
+    float sin_n = (dot(ortho, n_proj) < 0.0 ? -1.0 : 1.0) * sqrt(1.0 - cos_n * cos_n);
+    float angle_n = sin_n < 0.0 ? -ao_acos(cos_n) : ao_acos(cos_n);
+    /* The tangent plane's horizons, cos(angle_n +- pi/2). */
+    float cos_plus = -sin_n;
+    float cos_minus = sin_n;
+    float low_plus = cos_plus;
+    float low_minus = cos_minus;
+    /* Steps at least a pixel apart: a pixel within a few pixels' distance takes fewer
+     * (llvmpipe leaves the loop once a whole block of pixels has). */
+    for (int k = 0; k < AO_STEPS && float(k) <= radius_px; k++) {
+      float t = max((float(k) + jitter) / float(AO_STEPS) * radius_px, 1.5 + float(k));
+      vec2 offset = round(dir * t);
+      for (int side = 0; side < 2; side++) {
+        /* Off the screen: the border pixel, a real surface point (nothing beyond it). */
+        ivec2 q = clamp(p + ivec2(side == 0 ? offset : -offset), ivec2(0), size - 1);
+        float d = texelFetch(gbuffer_depth, q, 0).r;
+        vec3 delta = vec3((vec2(q) * ray_scale + ray_offset) * mix(1.0, d, perspective), -d) -
+                     center;
+        float dist2 = dot(delta, delta);
+        float inv_dist = inversesqrt(max(dist2, 1e-20));
+        float dist = dist2 * inv_dist;
+        /* Cycles counts a hit within the distance only; the last 5 % fades, so the border
+         * of the occluded band does not band with the step pattern. Background (d 0)
+         * occludes nothing; nor does a point within ~1 degree of the tangent plane (see
+         * the NOTE below). */
+        float weight = clamp((frame.ao_distance - dist) * fade, 0.0, 1.0);
+        weight = (d > 0.0 && dot(delta, n) > 0.02 * dist) ? weight : 0.0;
+        float c = dot(delta, v) * inv_dist;
+        if (side == 0) {
+          cos_plus = max(cos_plus, mix(low_plus, c, weight));
+        } else {
+          cos_minus = max(cos_minus, mix(low_minus, c, weight));
+        }
+      }
+    }
+    float h_plus = ao_acos(clamp(cos_plus, -1.0, 1.0));
+    float h_minus = -ao_acos(clamp(cos_minus, -1.0, 1.0));
+    float arc_plus = ao_arc(h_plus, cos_plus, sqrt(max(1.0 - cos_plus * cos_plus, 0.0)),
+                            cos_n, sin_n);
+    float arc_minus = ao_arc(h_minus, cos_minus,
+                             -sqrt(max(1.0 - cos_minus * cos_minus, 0.0)), cos_n, sin_n);
     visibility += n_proj_len * 0.25 * (arc_plus + arc_minus);
-    /* The same with both horizons on the tangent plane (h = angle_n +- pi/2). */
     open_sky += n_proj_len * (cos_n + angle_n * sin_n);
+    dir = next_slice * dir;
   }
-  out_ao_depth = vec2(open_sky > 1e-6 ? clamp(visibility / open_sky, 0.0, 1.0) : 1.0, depth);
+  out_ao_sums = vec4(visibility, open_sky, depth, 0.0);
 }
 
 #else /* AO_BLUR */
 
-/* Half resolution: the depth-aware mean of the 4x4 half-resolution neighbourhood, which
- * holds all 16 rotations of the search's pattern. Written with the view depth it stands
- * for, so the lighting pass can bring it to full resolution without bleeding across
+/* Half resolution: over the 4x4 half-resolution neighbourhood, which holds all 16 rotations
+ * of the search's pattern, the visible arcs summed and divided by the open arcs summed,
+ * keeping only neighbours on the pixel's tangent plane. Written with the view depth it
+ * stands for, so the lighting pass can bring it to full resolution without bleeding across
  * silhouettes (out_ao_depth: AO, view depth; depth 0 = background). */
 void main()
 {
   ivec2 size = ivec2(frame.viewport_size);
   ivec2 h0 = ivec2(gl_FragCoord.xy);
   ivec2 p = min(h0 * 2, size - 1);   /* the full-resolution pixel this one stands for */
-  /* The search wrote each value with the view depth of the pixel it stands for. */
-  vec2 own = texelFetch(ao_half, h0, 0).rg;
-  float depth = own.g;
+  vec4 own = texelFetch(ao_half, h0, 0);
+  float depth = own.b;
   if (depth <= 0.0) {
     out_ao_depth = vec2(1.0, 0.0);
     return;
   }
-  vec3 center = ao_view_position(p, depth);
   vec3 n = normalize(mat3(frame.view_from_world) * texelFetch(gbuffer_normal, p, 0).xyz);
+  /* A neighbour's distance from the tangent plane, dot(position - center, n), with the
+   * position (q * ray_scale + ray_offset) * d, -d (xy not times d in an orthographic view):
+   * linear in the neighbour's pixel q, so each tap costs a multiply-add or two. */
+  vec2 ray_scale = 2.0 / frame.viewport_size * frame.ao_view_ray.xy;
+  vec2 ray_offset = (1.0 / frame.viewport_size - 1.0) * frame.ao_view_ray.xy +
+                    frame.ao_view_ray.zw;
+  float perspective = frame.is_perspective != 0 ? 1.0 : 0.0;
+  vec2 slope = ray_scale * n.xy;
+  float plane_offset = dot(ray_offset, n.xy);
+  float center_along = dot(vec2(p), slope) + plane_offset;
+  float center_height = mix(center_along - depth * n.z, depth * (center_along - n.z),
+                            perspective);
   /* Off the tangent plane by more than this (scene units): another surface. */
-  float tolerance = 2.0 * ao_pixel_footprint(depth) + 0.02 * frame.ao_distance;
+  float inv_tolerance = 1.0 / (2.0 * ao_pixel_footprint(depth) + 0.02 * frame.ao_distance);
   ivec2 half_size = textureSize(ao_half, 0);
-  float sum = 0.0;
-  float weight_sum = 0.0;
+  float visible = 0.0;
+  float open = 0.0;
   for (int y = 0; y < 4; y++) {
     for (int x = 0; x < 4; x++) {
       ivec2 h = clamp(h0 + ivec2(x - 1, y - 1), ivec2(0), half_size - 1);
-      vec2 ao_depth = texelFetch(ao_half, h, 0).rg;
-      ivec2 q = min(h * 2, size - 1);   /* the full-resolution pixel h was computed at */
-      float off_plane = abs(dot(ao_view_position(q, ao_depth.g) - center, n));
+      vec4 sums = texelFetch(ao_half, h, 0);
+      float d = sums.b;
+      vec2 q = vec2(min(h * 2, size - 1));   /* the full-resolution pixel h was computed at */
+      float along = dot(q, slope) + plane_offset;
+      float height = mix(along - d * n.z, d * (along - n.z), perspective);
       /* Background neighbours (depth 0) count for nothing. */
-      float weight = ao_depth.g > 0.0 ? clamp(1.0 - off_plane / tolerance, 0.0, 1.0) : 0.0;
-      sum += weight * ao_depth.r;
-      weight_sum += weight;
+      float weight = d > 0.0 ? clamp(1.0 - abs(height - center_height) * inv_tolerance,
+                                     0.0, 1.0) : 0.0;
+      visible += weight * sums.r;
+      open += weight * sums.g;
     }
   }
-  /* No neighbour on this surface (a sliver): its own value. */
-  out_ao_depth = vec2(weight_sum > 1e-4 ? sum / weight_sum : own.r, depth);
+  /* No neighbour on this surface (a sliver), or no open arc: its own value. */
+  float ao = open > 1e-6 ? visible / open : (own.g > 1e-6 ? own.r / own.g : 1.0);
+  out_ao_depth = vec2(clamp(ao, 0.0, 1.0), depth);
 }
 
 #endif

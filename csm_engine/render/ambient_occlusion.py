@@ -35,9 +35,9 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
             settings.ao_distance <= 0.0:
         return None
     half_size = ((width + 1) // 2, (height + 1) // 2)
-    search = targets.texture("ao_half", half_size, 'RG32F')
+    search = targets.texture("ao_sums", half_size, 'RGBA32F')
     blurred = targets.texture("ao", half_size, 'RG32F')
-    search_fb = targets.framebuffer("ao_half", colors=(search,))
+    search_fb = targets.framebuffer("ao_sums", colors=(search,))
     blurred_fb = targets.framebuffer("ao", colors=(blurred,))
     library = shaders.LIBRARY
     inputs = (programs_key(), FRAME_LAYOUT.field_bytes(frame_data, _AO_FRAME_FIELDS))

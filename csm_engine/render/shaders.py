@@ -185,7 +185,7 @@ _AO_COMMON = dict(vertex="fullscreen_vert.glsl", fragment="ao_frag.glsl",
                   push=(), frame=True)
 PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
                                             ("FLOAT_2D", "gbuffer_normal")),
-                      outputs=(("VEC2", "out_ao_depth"),))
+                      outputs=(("VEC4", "out_ao_sums"),))
 PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_normal"),
                                                  ("FLOAT_2D", "ao_half")),
                            outputs=(("VEC2", "out_ao_depth"),),

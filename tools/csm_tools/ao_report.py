@@ -284,13 +284,31 @@ def csm_ao(scene, distance, profile=False):
             result.timings)
 
 
-def measure_scene(name, distance, resolution, samples, image_path=None):
-    scene = open_report_scene(name, resolution)
-    ao, covered, _ = csm_ao(scene, distance)
+def cached_cycles_ao(scene, name, distance, resolution, samples, cache_dir):
+    """Cycles' AO (``cycles_ao``) and the seconds it took, read from ``cache_dir`` when an
+    earlier run stored the same scene, distance, size and samples there (Cycles' seed is
+    fixed, so the render would be the same), else rendered and stored there."""
+    path = cache_dir and os.path.join(
+        cache_dir, f"cycles_{name}_d{distance:g}_{resolution[0]}x{resolution[1]}_"
+                   f"s{samples}.npz")
+    if path and os.path.isfile(path):
+        with np.load(path) as stored:
+            return stored["ao"], float(stored["seconds"])
     start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="csm_ao_report_") as folder:
         reference = cycles_ao(scene, distance, samples, folder)
-    cycles_seconds = time.perf_counter() - start
+    seconds = time.perf_counter() - start
+    if path:
+        os.makedirs(cache_dir, exist_ok=True)
+        np.savez(path, ao=reference, seconds=seconds)
+    return reference, seconds
+
+
+def measure_scene(name, distance, resolution, samples, image_path=None, cache_dir=None):
+    scene = open_report_scene(name, resolution)
+    ao, covered, _ = csm_ao(scene, distance)
+    reference, cycles_seconds = cached_cycles_ao(scene, name, distance, resolution, samples,
+                                                 cache_dir)
     values = compare(ao, reference, covered)
     values.update(scene=name, distance=distance, width=resolution[0], height=resolution[1],
                   samples=samples, cycles_seconds=cycles_seconds)
@@ -358,6 +376,9 @@ def build_parser(prog=PROG):
                         help="where ambient-occlusion.md and images/ go (default docs; "
                              "quick: a temporary folder)")
     parser.add_argument("--json", metavar="FILE", help="also write the numbers as JSON")
+    parser.add_argument("--cycles-cache", metavar="DIR",
+                        help="keep Cycles' renders in DIR and reuse them on the next run "
+                             "with the same size and samples (to compare CSM changes)")
     return parser
 
 
@@ -378,7 +399,8 @@ def run(argv, prog=PROG):
     results = []
     for name, distance in scenes:
         image = os.path.join(out_dir, "images", f"ao_{name}.png")
-        values = measure_scene(name, distance, resolution, samples, image)
+        values = measure_scene(name, distance, resolution, samples, image,
+                               args.cycles_cache)
         values["image"] = os.path.relpath(image, out_dir)
         results.append(values)
         print(f"ao-report: {name} (distance {distance:g}): mean abs. error "
