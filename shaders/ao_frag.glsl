@@ -44,13 +44,12 @@ float ao_pixel_footprint(float d)
 
 #ifndef AO_BLUR
 
-/* 4x4 ordered-dither index 0..15: neighbouring pixels get far-apart rotations. */
-float ao_bayer4(ivec2 p)
+/* The slice rotation of half-resolution pixel p, 0..1: a 3x3 pattern of 9 rotations, so
+ * the blur's 3x3 neighbourhood holds all of them; neighbours get far-apart ones. */
+float ao_rotation(ivec2 p)
 {
-  ivec2 q = p & 3;
-  int b = ((q.x ^ q.y) & 1) * 8 + (q.y & 1) * 4 + (((q.x ^ q.y) >> 1) & 1) * 2 +
-          ((q.y >> 1) & 1);
-  return float(b);
+  ivec2 cell = p % 3;
+  return (float((cell.y * 3 + cell.x) * 4 % 9) + 0.5) / 9.0;
 }
 
 /* acos on [-1, 1] to ~7e-5 rad (Abramowitz & Stegun 4.4.45): a few multiplies and a
@@ -77,16 +76,12 @@ void main()
   ivec2 ao_pixel = ivec2(gl_FragCoord.xy);
   ivec2 p = min(ao_pixel * 2, size - 1);
   float depth = texelFetch(gbuffer_depth, p, 0).r;
-  if (depth <= 0.0) {
-    out_ao_sums = vec4(1.0, 1.0, 0.0, 0.0);
-    return;
-  }
-  float radius_px = frame.ao_distance / ao_pixel_footprint(depth);
-  if (radius_px < 1.5) {
-    out_ao_sums = vec4(1.0, 1.0, depth, 0.0);   /* everything within the distance is inside this pixel */
-    return;
-  }
-  radius_px = min(radius_px, AO_MAX_RADIUS);
+  float radius_px = depth > 0.0 ?
+      min(frame.ao_distance / ao_pixel_footprint(depth), AO_MAX_RADIUS) : 0.0;
+  /* Nothing to search on the background, nor where everything within the distance is
+   * inside this pixel: there the step loop below runs no pass. */
+  bool searched = radius_px >= 1.5;
+  radius_px = searched ? radius_px : -1.0;
   vec3 center = ao_view_position(p, depth);
   vec3 n = normalize(mat3(frame.view_from_world) * texelFetch(gbuffer_normal, p, 0).xyz);
   vec3 v = frame.is_perspective != 0 ? normalize(-center) : vec3(0.0, 0.0, 1.0);
@@ -97,38 +92,45 @@ void main()
                     frame.ao_view_ray.zw;
   float perspective = frame.is_perspective != 0 ? 1.0 : 0.0;
   float fade = 1.0 / (0.05 * frame.ao_distance);
-
-  float rotation = (ao_bayer4(ao_pixel) + 0.5) / 16.0;
+  float rotation = ao_rotation(ao_pixel);
+  /* Interleaved gradient noise (Jimenez 2014) for the step offsets, independent of the
+   * rotation pattern. */
   float jitter = fract(52.9829189 * fract(dot(vec2(ao_pixel), vec2(0.06711056, 0.00583715))));
-  float phi0 = rotation * AO_PI / float(AO_SLICES);
-  vec2 dir0 = vec2(cos(phi0), sin(phi0));
-  float turn = AO_PI / float(AO_SLICES);
-  mat2 next_slice = mat2(cos(turn), sin(turn), -sin(turn), cos(turn));
 
+  /* The visible arcs and the arcs with nothing above the tangent plane (the slices'
+   * shares of the cosine-weighted hemisphere) go to the blur as sums: it divides one by
+   * the other over the neighbourhood, so a pixel with nothing nearby is exactly 1. */
   float visibility = 0.0;
   float open_sky = 0.0;
-  vec2 dir = dir0;
   for (int slice = 0; slice < AO_SLICES; slice++) {
+    float phi = (float(slice) + rotation) * AO_PI / float(AO_SLICES);
+    vec2 dir = vec2(cos(phi), sin(phi));
+    /* With square pixels, a screen direction is the same direction in view space, and the
+     * plane through the eye, the pixel and that direction is the slice. */
     vec3 dir_v = vec3(dir, 0.0);
     vec3 ortho = dir_v - dot(dir_v, v) * v;
     vec3 axis = normalize(cross(ortho, v));
     vec3 n_proj = n - axis * dot(n, axis);
-    float n_proj_len = max(length(n_proj), 1e-6);
-    float cos_n = clamp(dot(n_proj, v) / n_proj_len, 0.0, 1.0);
+    /* A slice holding no part of the hemisphere's weight adds nothing to either sum. */
+    float n_proj_len = length(n_proj);
+    float cos_n = clamp(dot(n_proj, v) / max(n_proj_len, 1e-6), 0.0, 1.0);
     float sin_n = (dot(ortho, n_proj) < 0.0 ? -1.0 : 1.0) * sqrt(1.0 - cos_n * cos_n);
     float angle_n = sin_n < 0.0 ? -ao_acos(cos_n) : ao_acos(cos_n);
-    /* The tangent plane's horizons, cos(angle_n +- pi/2). */
-    float cos_plus = -sin_n;
-    float cos_minus = sin_n;
-    float low_plus = cos_plus;
-    float low_minus = cos_minus;
-    /* Steps at least a pixel apart: a pixel within a few pixels' distance takes fewer
+    /* The tangent plane's horizons, cos(angle_n +- pi/2): the lowest either side keeps. */
+    float low_plus = -sin_n;
+    float low_minus = sin_n;
+    float cos_plus = low_plus;
+    float cos_minus = low_minus;
+    /* Steps at least a pixel apart: a pixel whose distance spans a few pixels takes fewer
      * (llvmpipe leaves the loop once a whole block of pixels has). */
     for (int k = 0; k < AO_STEPS && float(k) <= radius_px; k++) {
+      /* Even spacing: the highest horizon within the distance is often near its end (a
+       * wall's points at exactly the distance), so the far steps matter as much as the
+       * near. */
       float t = max((float(k) + jitter) / float(AO_STEPS) * radius_px, 1.5 + float(k));
       vec2 offset = round(dir * t);
       for (int side = 0; side < 2; side++) {
-        /* Off the screen: the border pixel, a real surface point (nothing beyond it). */
+        /* Off the screen: the border pixel, a real surface point (none beyond it). */
         ivec2 q = clamp(p + ivec2(side == 0 ? offset : -offset), ivec2(0), size - 1);
         float d = texelFetch(gbuffer_depth, q, 0).r;
         vec3 delta = vec3((vec2(q) * ray_scale + ray_offset) * mix(1.0, d, perspective), -d) -
@@ -137,9 +139,13 @@ void main()
         float inv_dist = inversesqrt(max(dist2, 1e-20));
         float dist = dist2 * inv_dist;
         /* Cycles counts a hit within the distance only; the last 5 % fades, so the border
-         * of the occluded band does not band with the step pattern. Background (d 0)
-         * occludes nothing; nor does a point within ~1 degree of the tangent plane (see
-         * the NOTE below). */
+         * of the occluded band does not band with the step pattern. The background (d 0)
+         * occludes nothing.
+         * NOTE: a sample is the centre of the pixel nearest the step, a little off the
+         * slice plane; on a flat surface that alone reads as a horizon just above the
+         * tangent plane (a plane would occlude itself by ~2 %, most at grazing views).
+         * Points within ~1 degree of the tangent plane therefore never occlude; their
+         * cosine weight is ~0. */
         float weight = clamp((frame.ao_distance - dist) * fade, 0.0, 1.0);
         weight = (d > 0.0 && dot(delta, n) > 0.02 * dist) ? weight : 0.0;
         float c = dot(delta, v) * inv_dist;
@@ -150,22 +156,24 @@ void main()
         }
       }
     }
-    float h_plus = ao_acos(clamp(cos_plus, -1.0, 1.0));
-    float h_minus = -ao_acos(clamp(cos_minus, -1.0, 1.0));
-    float arc_plus = ao_arc(h_plus, cos_plus, sqrt(max(1.0 - cos_plus * cos_plus, 0.0)),
+    /* Both horizons are at or above the tangent plane (they start there), so the arcs
+     * need no clamping to the hemisphere around the normal. */
+    cos_plus = clamp(cos_plus, -1.0, 1.0);
+    cos_minus = clamp(cos_minus, -1.0, 1.0);
+    float arc_plus = ao_arc(ao_acos(cos_plus), cos_plus, sqrt(1.0 - cos_plus * cos_plus),
                             cos_n, sin_n);
-    float arc_minus = ao_arc(h_minus, cos_minus,
-                             -sqrt(max(1.0 - cos_minus * cos_minus, 0.0)), cos_n, sin_n);
+    float arc_minus = ao_arc(-ao_acos(cos_minus), cos_minus,
+                             -sqrt(1.0 - cos_minus * cos_minus), cos_n, sin_n);
     visibility += n_proj_len * 0.25 * (arc_plus + arc_minus);
+    /* The same with both horizons on the tangent plane (h = angle_n +- pi/2). */
     open_sky += n_proj_len * (cos_n + angle_n * sin_n);
-    dir = next_slice * dir;
   }
-  out_ao_sums = vec4(visibility, open_sky, depth, 0.0);
+  out_ao_sums = searched ? vec4(visibility, open_sky, depth, 0.0) : vec4(1.0, 1.0, depth, 0.0);
 }
 
 #else /* AO_BLUR */
 
-/* Half resolution: over the 4x4 half-resolution neighbourhood, which holds all 16 rotations
+/* Half resolution: over the 3x3 half-resolution neighbourhood, which holds all 9 rotations
  * of the search's pattern, the visible arcs summed and divided by the open arcs summed,
  * keeping only neighbours on the pixel's tangent plane. Written with the view depth it
  * stands for, so the lighting pass can bring it to full resolution without bleeding across
@@ -177,10 +185,6 @@ void main()
   ivec2 p = min(h0 * 2, size - 1);   /* the full-resolution pixel this one stands for */
   vec4 own = texelFetch(ao_half, h0, 0);
   float depth = own.b;
-  if (depth <= 0.0) {
-    out_ao_depth = vec2(1.0, 0.0);
-    return;
-  }
   vec3 n = normalize(mat3(frame.view_from_world) * texelFetch(gbuffer_normal, p, 0).xyz);
   /* A neighbour's distance from the tangent plane, dot(position - center, n), with the
    * position (q * ray_scale + ray_offset) * d, -d (xy not times d in an orthographic view):
@@ -199,8 +203,8 @@ void main()
   ivec2 half_size = textureSize(ao_half, 0);
   float visible = 0.0;
   float open = 0.0;
-  for (int y = 0; y < 4; y++) {
-    for (int x = 0; x < 4; x++) {
+  for (int y = 0; y < 3; y++) {
+    for (int x = 0; x < 3; x++) {
       ivec2 h = clamp(h0 + ivec2(x - 1, y - 1), ivec2(0), half_size - 1);
       vec4 sums = texelFetch(ao_half, h, 0);
       float d = sums.b;
@@ -216,7 +220,7 @@ void main()
   }
   /* No neighbour on this surface (a sliver), or no open arc: its own value. */
   float ao = open > 1e-6 ? visible / open : (own.g > 1e-6 ? own.r / own.g : 1.0);
-  out_ao_depth = vec2(clamp(ao, 0.0, 1.0), depth);
+  out_ao_depth = depth > 0.0 ? vec2(clamp(ao, 0.0, 1.0), depth) : vec2(1.0, 0.0);
 }
 
 #endif
