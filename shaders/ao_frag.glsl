@@ -42,7 +42,35 @@ float ao_pixel_footprint(float d)
   return (frame.is_perspective != 0 ? d : 1.0) / frame.ao_pixels_per_unit;
 }
 
-#ifndef AO_BLUR
+/* The screen radius (full-resolution pixels) of the distance around a pixel at view depth
+ * d, at most AO_MAX_RADIUS; below 1.5 (and on the background, d 0) there is nothing to
+ * search: everything within the distance is inside the pixel. */
+float ao_radius_px(float d)
+{
+  return d > 0.0 ? min(frame.ao_distance / ao_pixel_footprint(d), AO_MAX_RADIUS) : 0.0;
+}
+
+#if defined(AO_MASK)
+
+/* Half resolution, before the other two: the pixels with nothing to search get their
+ * final values here (open: AO 1), and the others are discarded, so the depth target the
+ * pass draws into keeps its cleared 0 there and 1 (the triangle's depth) elsewhere. The
+ * search and the blur then run depth-tested (GREATER) and only where a search is needed:
+ * llvmpipe skips the pixel blocks that fail an early depth test, where an `if` in the
+ * shader would save nothing. */
+void main()
+{
+  ivec2 size = ivec2(frame.viewport_size);
+  ivec2 p = min(ivec2(gl_FragCoord.xy) * 2, size - 1);
+  float depth = texelFetch(gbuffer_depth, p, 0).r;
+  if (ao_radius_px(depth) >= 1.5) {
+    discard;
+  }
+  out_ao_sums = vec4(1.0, 1.0, depth, 0.0);
+  out_ao_depth = vec2(1.0, depth);
+}
+
+#elif !defined(AO_BLUR)
 
 /* The slice rotation of half-resolution pixel p, 0..1: a 3x3 pattern of 9 rotations, so
  * the blur's 3x3 neighbourhood holds all of them; neighbours get far-apart ones. */
@@ -76,12 +104,8 @@ void main()
   ivec2 ao_pixel = ivec2(gl_FragCoord.xy);
   ivec2 p = min(ao_pixel * 2, size - 1);
   float depth = texelFetch(gbuffer_depth, p, 0).r;
-  float radius_px = depth > 0.0 ?
-      min(frame.ao_distance / ao_pixel_footprint(depth), AO_MAX_RADIUS) : 0.0;
-  /* Nothing to search on the background, nor where everything within the distance is
-   * inside this pixel: there the step loop below runs no pass. */
-  bool searched = radius_px >= 1.5;
-  radius_px = searched ? radius_px : -1.0;
+  /* Drawn only where there is something to search (see AO_MASK). */
+  float radius_px = ao_radius_px(depth);
   vec3 center = ao_view_position(p, depth);
   vec3 n = normalize(mat3(frame.view_from_world) * texelFetch(gbuffer_normal, p, 0).xyz);
   vec3 v = frame.is_perspective != 0 ? normalize(-center) : vec3(0.0, 0.0, 1.0);
@@ -168,7 +192,7 @@ void main()
     /* The same with both horizons on the tangent plane (h = angle_n +- pi/2). */
     open_sky += n_proj_len * (cos_n + angle_n * sin_n);
   }
-  out_ao_sums = searched ? vec4(visibility, open_sky, depth, 0.0) : vec4(1.0, 1.0, depth, 0.0);
+  out_ao_sums = vec4(visibility, open_sky, depth, 0.0);
 }
 
 #else /* AO_BLUR */

@@ -35,33 +35,49 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
             settings.ao_distance <= 0.0:
         return None
     half_size = ((width + 1) // 2, (height + 1) // 2)
-    search = targets.texture("ao_sums", half_size, 'RGBA32F')
+    sums = targets.texture("ao_sums", half_size, 'RGBA32F')
     blurred = targets.texture("ao", half_size, 'RG32F')
-    search_fb = targets.framebuffer("ao_sums", colors=(search,))
-    blurred_fb = targets.framebuffer("ao", colors=(blurred,))
+    searched = targets.texture("ao_searched", half_size, 'DEPTH_COMPONENT32F')
     library = shaders.LIBRARY
     inputs = (programs_key(), FRAME_LAYOUT.field_bytes(frame_data, _AO_FRAME_FIELDS))
     frame_cache = targets.frame_cache
     held = frame_cache.ambient_occlusion
     if gbuffer_kept and held is not None and held.texture is blurred and \
             held.inputs == inputs:
+        blurred_fb = targets.framebuffer("ao", depth=searched, colors=(blurred,))
         return AmbientOcclusion(blurred, blurred_fb, True)
     frame_cache.ambient_occlusion = None
-    for program, fb, extra in (("ao", search_fb, ()),
-                               ("ao_blur", blurred_fb, (("ao_half", search),))):
+    # NOTE: the mask pass finishes the pixels with nothing to search (background, or the
+    # whole distance inside the pixel) and leaves depth 0 under the others; the search
+    # and the blur are depth-tested against it (their triangle lies at depth 1: GREATER),
+    # so llvmpipe skips the blocks without a search instead of running them masked.
+    passes = (("ao_mask", targets.framebuffer("ao_mask", depth=searched,
+                                              colors=(sums, blurred))),
+              ("ao", targets.framebuffer("ao_search", depth=searched, colors=(sums,))),
+              ("ao_blur", targets.framebuffer("ao", depth=searched, colors=(blurred,))))
+    for program, fb in passes:
         shader = library.get(program)
         with fb.bind():
             gpu.state.viewport_set(0, 0, *half_size)
-            gpu.state.depth_test_set('NONE')
-            gpu.state.depth_mask_set(False)
+            if program == "ao_mask":
+                targets.call(fb.clear, depth=0.0)
+                gpu.state.depth_test_set('ALWAYS')
+                gpu.state.depth_mask_set(True)
+            else:
+                gpu.state.depth_test_set('GREATER')
+                gpu.state.depth_mask_set(False)
             shader.bind()
             shader.uniform_block("frame", frame_ubo)
-            if program == "ao":
+            if program != "ao_blur":
                 shader.uniform_sampler("gbuffer_depth", gbuffer.view_depth)
-            shader.uniform_sampler("gbuffer_normal", gbuffer.normal)
-            for name, texture in extra:
-                shader.uniform_sampler(name, texture)
+            if program != "ao_mask":
+                shader.uniform_sampler("gbuffer_normal", gbuffer.normal)
+            if program == "ao_blur":
+                shader.uniform_sampler("ao_half", sums)
             targets.call(targets.fullscreen_batch().draw, shader)
+    gpu.state.depth_test_set('NONE')
+    gpu.state.depth_mask_set(False)
+    blurred_fb = passes[-1][1]
     if targets.records:
         frame_cache.ambient_occlusion = HeldAmbientOcclusion(blurred, inputs)
     return AmbientOcclusion(blurred, blurred_fb, False)
