@@ -50,34 +50,13 @@ float ao_radius_px(float d)
   return d > 0.0 ? min(frame.ao_distance / ao_pixel_footprint(d), AO_MAX_RADIUS) : 0.0;
 }
 
-#if defined(AO_MASK)
-
-/* Half resolution, before the other two: the pixels with nothing to search get their
- * final values here (open: AO 1), and the others are discarded, so the depth target the
- * pass draws into keeps its cleared 0 there and 1 (the triangle's depth) elsewhere. The
- * search and the blur then run depth-tested (GREATER) and only where a search is needed:
- * llvmpipe skips the pixel blocks that fail an early depth test, where an `if` in the
- * shader would save nothing. */
-void main()
-{
-  ivec2 size = ivec2(frame.viewport_size);
-  ivec2 p = min(ivec2(gl_FragCoord.xy) * 2, size - 1);
-  float depth = texelFetch(gbuffer_depth, p, 0).r;
-  if (ao_radius_px(depth) >= 1.5) {
-    discard;
-  }
-  out_ao_sums = vec4(1.0, 1.0, depth, 0.0);
-  out_ao_depth = vec2(1.0, depth);
-}
-
-#elif !defined(AO_BLUR)
+#ifndef AO_BLUR
 
 /* The slice rotation of half-resolution pixel p, 0..1: a 3x3 pattern of 9 rotations, so
  * the blur's 3x3 neighbourhood holds all of them; neighbours get far-apart ones. */
 float ao_rotation(ivec2 p)
 {
-  ivec2 cell = p % 3;
-  return (float((cell.y * 3 + cell.x) * 4 % 9) + 0.5) / 9.0;
+  return (float((p.x + 2 * p.y) % 5) + 0.5) / 5.0;
 }
 
 /* acos on [-1, 1] to ~7e-5 rad (Abramowitz & Stegun 4.4.45): a few multiplies and a
@@ -104,8 +83,15 @@ void main()
   ivec2 ao_pixel = ivec2(gl_FragCoord.xy);
   ivec2 p = min(ao_pixel * 2, size - 1);
   float depth = texelFetch(gbuffer_depth, p, 0).r;
-  /* Drawn only where there is something to search (see AO_MASK). */
   float radius_px = ao_radius_px(depth);
+  /* Nothing to search on the background, nor where everything within the distance is
+   * inside this pixel: there the step loop runs no pass, the value is "open", and the
+   * depth written here keeps the blur away (it is drawn depth-tested, GREATER, with its
+   * triangle at depth 1: llvmpipe skips the pixel blocks that fail an early depth test,
+   * where an `if` in the shader would save nothing). */
+  bool searched = radius_px >= 1.5;
+  radius_px = searched ? radius_px : -1.0;
+  gl_FragDepth = searched ? 0.0 : 1.0;
   vec3 center = ao_view_position(p, depth);
   vec3 n = normalize(mat3(frame.view_from_world) * texelFetch(gbuffer_normal, p, 0).xyz);
   vec3 v = frame.is_perspective != 0 ? normalize(-center) : vec3(0.0, 0.0, 1.0);
@@ -192,7 +178,7 @@ void main()
     /* The same with both horizons on the tangent plane (h = angle_n +- pi/2). */
     open_sky += n_proj_len * (cos_n + angle_n * sin_n);
   }
-  out_ao_sums = vec4(visibility, open_sky, depth, 0.0);
+  out_ao_sums = searched ? vec4(visibility, open_sky, depth, 0.0) : vec4(1.0, 1.0, depth, 0.0);
 }
 
 #else /* AO_BLUR */
@@ -217,25 +203,33 @@ void main()
   vec2 ray_offset = (1.0 / frame.viewport_size - 1.0) * frame.ao_view_ray.xy +
                     frame.ao_view_ray.zw;
   float perspective = frame.is_perspective != 0 ? 1.0 : 0.0;
+  /* (q - p) * slope is how much farther along n a point at depth 1 of pixel q lies than
+   * one of pixel p; height = d * (along_d + along) + along_1 * along is its distance
+   * from the plane through the eye along n, less that of the pixel's own point
+   * (perspective: along_d 1, along_1 0; orthographic: along_d 0, along_1 1). */
   vec2 slope = ray_scale * n.xy;
-  float plane_offset = dot(ray_offset, n.xy);
-  float center_along = dot(vec2(p), slope) + plane_offset;
-  float center_height = mix(center_along - depth * n.z, depth * (center_along - n.z),
-                            perspective);
+  float along_p = dot(vec2(p), slope) + dot(ray_offset, n.xy);
+  float persp_along = perspective * along_p - n.z;
+  float ortho_along = (1.0 - perspective) * along_p;
+  float center_height = depth * persp_along + ortho_along;
   /* Off the tangent plane by more than this (scene units): another surface. */
   float inv_tolerance = 1.0 / (2.0 * ao_pixel_footprint(depth) + 0.02 * frame.ao_distance);
-  ivec2 half_size = textureSize(ao_half, 0);
+  ivec2 last = textureSize(ao_half, 0) - 1;
   float visible = 0.0;
   float open = 0.0;
-  for (int y = 0; y < 3; y++) {
-    for (int x = 0; x < 3; x++) {
-      ivec2 h = clamp(h0 + ivec2(x - 1, y - 1), ivec2(0), half_size - 1);
+  for (int y = -1; y <= 1; y++) {
+    for (int x = -1; x <= 1; x++) {
+      if (x != 0 && y != 0) continue;
+      ivec2 h = clamp(h0 + ivec2(x, y), ivec2(0), last);
       vec4 sums = texelFetch(ao_half, h, 0);
       float d = sums.b;
-      vec2 q = vec2(min(h * 2, size - 1));   /* the full-resolution pixel h was computed at */
-      float along = dot(q, slope) + plane_offset;
-      float height = mix(along - d * n.z, d * (along - n.z), perspective);
-      /* Background neighbours (depth 0) count for nothing. */
+      /* h was computed at full-resolution pixel 2h (the last column or row of an odd
+       * size aside, a pixel off: well inside the tolerance). */
+      float along = dot(vec2(h - h0) * 2.0, slope);
+      float height = d * (persp_along + perspective * along) + ortho_along +
+                     (1.0 - perspective) * along;
+      /* Background neighbours (depth 0, also the pixels with nothing to search) count for
+       * nothing. */
       float weight = d > 0.0 ? clamp(1.0 - abs(height - center_height) * inv_tolerance,
                                      0.0, 1.0) : 0.0;
       visible += weight * sums.r;
@@ -244,7 +238,7 @@ void main()
   }
   /* No neighbour on this surface (a sliver), or no open arc: its own value. */
   float ao = open > 1e-6 ? visible / open : (own.g > 1e-6 ? own.r / own.g : 1.0);
-  out_ao_depth = depth > 0.0 ? vec2(clamp(ao, 0.0, 1.0), depth) : vec2(1.0, 0.0);
+  out_ao_depth = vec2(clamp(ao, 0.0, 1.0), depth);
 }
 
 #endif

@@ -47,20 +47,20 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
         blurred_fb = targets.framebuffer("ao", depth=searched, colors=(blurred,))
         return AmbientOcclusion(blurred, blurred_fb, True)
     frame_cache.ambient_occlusion = None
-    # NOTE: the mask pass finishes the pixels with nothing to search (background, or the
-    # whole distance inside the pixel) and leaves depth 0 under the others; the search
-    # and the blur are depth-tested against it (their triangle lies at depth 1: GREATER),
-    # so llvmpipe skips the blocks without a search instead of running them masked.
-    passes = (("ao_mask", targets.framebuffer("ao_mask", depth=searched,
-                                              colors=(sums, blurred))),
-              ("ao", targets.framebuffer("ao_search", depth=searched, colors=(sums,))),
-              ("ao_blur", targets.framebuffer("ao", depth=searched, colors=(blurred,))))
-    for program, fb in passes:
+    # NOTE: the search writes depth 1 where there is nothing to search (background, or
+    # the whole distance inside the pixel) and 0 elsewhere; the blur is depth-tested
+    # against it (its triangle lies at depth 1: GREATER), so llvmpipe skips the blocks
+    # without a search instead of running them masked. What it skips keeps the cleared
+    # "open, background" (AO 1, depth 0), which the lighting pass reads as open.
+    search_fb = targets.framebuffer("ao_search", depth=searched, colors=(sums,))
+    blurred_fb = targets.framebuffer("ao", depth=searched, colors=(blurred,))
+    with blurred_fb.bind():
+        targets.call(blurred_fb.clear, color=(1.0, 0.0, 0.0, 0.0))
+    for program, fb in (("ao", search_fb), ("ao_blur", blurred_fb)):
         shader = library.get(program)
         with fb.bind():
             gpu.state.viewport_set(0, 0, *half_size)
-            if program == "ao_mask":
-                targets.call(fb.clear, depth=0.0)
+            if program == "ao":
                 gpu.state.depth_test_set('ALWAYS')
                 gpu.state.depth_mask_set(True)
             else:
@@ -68,16 +68,14 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
                 gpu.state.depth_mask_set(False)
             shader.bind()
             shader.uniform_block("frame", frame_ubo)
-            if program != "ao_blur":
+            if program == "ao":
                 shader.uniform_sampler("gbuffer_depth", gbuffer.view_depth)
-            if program != "ao_mask":
-                shader.uniform_sampler("gbuffer_normal", gbuffer.normal)
-            if program == "ao_blur":
+            else:
                 shader.uniform_sampler("ao_half", sums)
+            shader.uniform_sampler("gbuffer_normal", gbuffer.normal)
             targets.call(targets.fullscreen_batch().draw, shader)
     gpu.state.depth_test_set('NONE')
     gpu.state.depth_mask_set(False)
-    blurred_fb = passes[-1][1]
     if targets.records:
         frame_cache.ambient_occlusion = HeldAmbientOcclusion(blurred, inputs)
     return AmbientOcclusion(blurred, blurred_fb, False)

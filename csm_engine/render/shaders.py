@@ -186,9 +186,6 @@ _AO_COMMON = dict(vertex="fullscreen_vert.glsl", fragment="ao_frag.glsl",
 PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
                                             ("FLOAT_2D", "gbuffer_normal")),
                       outputs=(("VEC4", "out_ao_sums"),))
-PROGRAMS["ao_mask"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),),
-                           outputs=(("VEC4", "out_ao_sums"), ("VEC2", "out_ao_depth")),
-                           defines=(("AO_MASK", "1"),))
 PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_normal"),
                                                  ("FLOAT_2D", "ao_half")),
                            outputs=(("VEC2", "out_ao_depth"),),
