@@ -24,7 +24,6 @@
 
 #define AO_PI 3.14159265358979
 #define AO_HALF_PI 1.57079632679490
-#define AO_SLICES 1
 #define AO_STEPS 8             /* per side of a slice */
 #define AO_MAX_RADIUS 256.0    /* pixels: a nearby occluder farther on screen is missed */
 
@@ -52,11 +51,20 @@ float ao_radius_px(float d)
 
 #ifndef AO_BLUR
 
-/* The slice rotation of half-resolution pixel p, 0..1: a 3x3 pattern of 9 rotations, so
- * the blur's 3x3 neighbourhood holds all of them; neighbours get far-apart ones. */
-float ao_rotation(ivec2 p)
+/* The slice direction of half-resolution pixel p: one of AO_ROTATIONS evenly spread over
+ * half a turn, (index + 0.5) / AO_ROTATIONS * pi, in a pattern where every pixel and its
+ * four edge neighbours (the blur's taps) hold all of them. */
+#define AO_ROTATIONS 5
+const vec2 AO_DIRECTIONS[AO_ROTATIONS] = vec2[AO_ROTATIONS](
+    vec2(0.95105652, 0.30901699),
+    vec2(0.58778525, 0.80901699),
+    vec2(0.00000000, 1.00000000),
+    vec2(-0.58778525, 0.80901699),
+    vec2(-0.95105652, 0.30901699));
+
+vec2 ao_direction(ivec2 p)
 {
-  return (float((p.x + 2 * p.y) % 5) + 0.5) / 5.0;
+  return AO_DIRECTIONS[(p.x + 2 * p.y) % AO_ROTATIONS];
 }
 
 /* acos on [-1, 1] to ~7e-5 rad (Abramowitz & Stegun 4.4.45): a few multiplies and a
@@ -102,7 +110,6 @@ void main()
                     frame.ao_view_ray.zw;
   float perspective = frame.is_perspective != 0 ? 1.0 : 0.0;
   float fade = 1.0 / (0.05 * frame.ao_distance);
-  float rotation = ao_rotation(ao_pixel);
   /* Interleaved gradient noise (Jimenez 2014) for the step offsets, independent of the
    * rotation pattern. */
   float jitter = fract(52.9829189 * fract(dot(vec2(ao_pixel), vec2(0.06711056, 0.00583715))));
@@ -110,74 +117,69 @@ void main()
   /* The visible arcs and the arcs with nothing above the tangent plane (the slices'
    * shares of the cosine-weighted hemisphere) go to the blur as sums: it divides one by
    * the other over the neighbourhood, so a pixel with nothing nearby is exactly 1. */
-  float visibility = 0.0;
-  float open_sky = 0.0;
-  for (int slice = 0; slice < AO_SLICES; slice++) {
-    float phi = (float(slice) + rotation) * AO_PI / float(AO_SLICES);
-    vec2 dir = vec2(cos(phi), sin(phi));
-    /* With square pixels, a screen direction is the same direction in view space, and the
-     * plane through the eye, the pixel and that direction is the slice. */
-    vec3 dir_v = vec3(dir, 0.0);
-    vec3 ortho = dir_v - dot(dir_v, v) * v;
-    vec3 axis = normalize(cross(ortho, v));
-    vec3 n_proj = n - axis * dot(n, axis);
-    /* A slice holding no part of the hemisphere's weight adds nothing to either sum. */
-    float n_proj_len = length(n_proj);
-    float cos_n = clamp(dot(n_proj, v) / max(n_proj_len, 1e-6), 0.0, 1.0);
-    float sin_n = (dot(ortho, n_proj) < 0.0 ? -1.0 : 1.0) * sqrt(1.0 - cos_n * cos_n);
-    float angle_n = sin_n < 0.0 ? -ao_acos(cos_n) : ao_acos(cos_n);
-    /* The tangent plane's horizons, cos(angle_n +- pi/2): the lowest either side keeps. */
-    float low_plus = -sin_n;
-    float low_minus = sin_n;
-    float cos_plus = low_plus;
-    float cos_minus = low_minus;
-    /* Steps at least a pixel apart: a pixel whose distance spans a few pixels takes fewer
-     * (llvmpipe leaves the loop once a whole block of pixels has). */
-    for (int k = 0; k < AO_STEPS && float(k) <= radius_px; k++) {
-      /* Even spacing: the highest horizon within the distance is often near its end (a
-       * wall's points at exactly the distance), so the far steps matter as much as the
-       * near. */
-      float t = max((float(k) + jitter) / float(AO_STEPS) * radius_px, 1.5 + float(k));
-      vec2 offset = round(dir * t);
-      for (int side = 0; side < 2; side++) {
-        /* Off the screen: the border pixel, a real surface point (none beyond it). */
-        ivec2 q = clamp(p + ivec2(side == 0 ? offset : -offset), ivec2(0), size - 1);
-        float d = texelFetch(gbuffer_depth, q, 0).r;
-        vec3 delta = vec3((vec2(q) * ray_scale + ray_offset) * mix(1.0, d, perspective), -d) -
-                     center;
-        float dist2 = dot(delta, delta);
-        float inv_dist = inversesqrt(max(dist2, 1e-20));
-        float dist = dist2 * inv_dist;
-        /* Cycles counts a hit within the distance only; the last 5 % fades, so the border
-         * of the occluded band does not band with the step pattern. The background (d 0)
-         * occludes nothing.
-         * NOTE: a sample is the centre of the pixel nearest the step, a little off the
-         * slice plane; on a flat surface that alone reads as a horizon just above the
-         * tangent plane (a plane would occlude itself by ~2 %, most at grazing views).
-         * Points within ~1 degree of the tangent plane therefore never occlude; their
-         * cosine weight is ~0. */
-        float weight = clamp((frame.ao_distance - dist) * fade, 0.0, 1.0);
-        weight = (d > 0.0 && dot(delta, n) > 0.02 * dist) ? weight : 0.0;
-        float c = dot(delta, v) * inv_dist;
-        if (side == 0) {
-          cos_plus = max(cos_plus, mix(low_plus, c, weight));
-        } else {
-          cos_minus = max(cos_minus, mix(low_minus, c, weight));
-        }
+  vec2 dir = ao_direction(ao_pixel);
+  /* With square pixels, a screen direction is the same direction in view space, and the
+   * plane through the eye, the pixel and that direction is the slice. */
+  vec3 dir_v = vec3(dir, 0.0);
+  vec3 ortho = dir_v - dot(dir_v, v) * v;
+  vec3 axis = normalize(cross(ortho, v));
+  vec3 n_proj = n - axis * dot(n, axis);
+  /* A slice holding no part of the hemisphere's weight adds nothing to either sum. */
+  float n_proj_len = length(n_proj);
+  float cos_n = clamp(dot(n_proj, v) / max(n_proj_len, 1e-6), 0.0, 1.0);
+  float sin_n = (dot(ortho, n_proj) < 0.0 ? -1.0 : 1.0) * sqrt(1.0 - cos_n * cos_n);
+  float angle_n = sin_n < 0.0 ? -ao_acos(cos_n) : ao_acos(cos_n);
+  /* The tangent plane's horizons, cos(angle_n +- pi/2): the lowest either side keeps. */
+  float low_plus = -sin_n;
+  float low_minus = sin_n;
+  float cos_plus = low_plus;
+  float cos_minus = low_minus;
+  /* Steps at least a pixel apart: a pixel whose distance spans a few pixels takes fewer
+   * (llvmpipe leaves the loop once a whole block of pixels has). */
+  for (int k = 0; k < AO_STEPS && float(k) <= radius_px; k++) {
+    /* Even spacing: the highest horizon within the distance is often near its end (a
+     * wall's points at exactly the distance), so the far steps matter as much as the
+     * near. */
+    float t = max((float(k) + jitter) / float(AO_STEPS) * radius_px, 1.5 + float(k));
+    vec2 offset = round(dir * t);
+    for (int side = 0; side < 2; side++) {
+      /* Off the screen: the border pixel, a real surface point (none beyond it). */
+      ivec2 q = clamp(p + ivec2(side == 0 ? offset : -offset), ivec2(0), size - 1);
+      float d = texelFetch(gbuffer_depth, q, 0).r;
+      vec3 delta = vec3((vec2(q) * ray_scale + ray_offset) * mix(1.0, d, perspective), -d) -
+                   center;
+      float dist2 = dot(delta, delta);
+      float inv_dist = inversesqrt(max(dist2, 1e-20));
+      float dist = dist2 * inv_dist;
+      /* Cycles counts a hit within the distance only; the last 5 % fades, so the border
+       * of the occluded band does not band with the step pattern. The background (d 0)
+       * occludes nothing.
+       * NOTE: a sample is the centre of the pixel nearest the step, a little off the
+       * slice plane; on a flat surface that alone reads as a horizon just above the
+       * tangent plane (a plane would occlude itself by ~2 %, most at grazing views).
+       * Points within ~1 degree of the tangent plane therefore never occlude; their
+       * cosine weight is ~0. */
+      float weight = clamp((frame.ao_distance - dist) * fade, 0.0, 1.0);
+      weight = (d > 0.0 && dot(delta, n) > 0.02 * dist) ? weight : 0.0;
+      float c = dot(delta, v) * inv_dist;
+      if (side == 0) {
+        cos_plus = max(cos_plus, mix(low_plus, c, weight));
+      } else {
+        cos_minus = max(cos_minus, mix(low_minus, c, weight));
       }
     }
-    /* Both horizons are at or above the tangent plane (they start there), so the arcs
-     * need no clamping to the hemisphere around the normal. */
-    cos_plus = clamp(cos_plus, -1.0, 1.0);
-    cos_minus = clamp(cos_minus, -1.0, 1.0);
-    float arc_plus = ao_arc(ao_acos(cos_plus), cos_plus, sqrt(1.0 - cos_plus * cos_plus),
-                            cos_n, sin_n);
-    float arc_minus = ao_arc(-ao_acos(cos_minus), cos_minus,
-                             -sqrt(1.0 - cos_minus * cos_minus), cos_n, sin_n);
-    visibility += n_proj_len * 0.25 * (arc_plus + arc_minus);
-    /* The same with both horizons on the tangent plane (h = angle_n +- pi/2). */
-    open_sky += n_proj_len * (cos_n + angle_n * sin_n);
   }
+  /* Both horizons are at or above the tangent plane (they start there), so the arcs
+   * need no clamping to the hemisphere around the normal. */
+  cos_plus = clamp(cos_plus, -1.0, 1.0);
+  cos_minus = clamp(cos_minus, -1.0, 1.0);
+  float arc_plus = ao_arc(ao_acos(cos_plus), cos_plus, sqrt(1.0 - cos_plus * cos_plus),
+                          cos_n, sin_n);
+  float arc_minus = ao_arc(-ao_acos(cos_minus), cos_minus,
+                           -sqrt(1.0 - cos_minus * cos_minus), cos_n, sin_n);
+  float visibility = n_proj_len * 0.25 * (arc_plus + arc_minus);
+  /* The same with both horizons on the tangent plane (h = angle_n +- pi/2). */
+  float open_sky = n_proj_len * (cos_n + angle_n * sin_n);
   out_ao_sums = searched ? vec4(visibility, open_sky, depth, 0.0) : vec4(1.0, 1.0, depth, 0.0);
 }
 
@@ -215,29 +217,28 @@ void main()
   /* Off the tangent plane by more than this (scene units): another surface. */
   float inv_tolerance = 1.0 / (2.0 * ao_pixel_footprint(depth) + 0.02 * frame.ao_distance);
   ivec2 last = textureSize(ao_half, 0) - 1;
-  float visible = 0.0;
-  float open = 0.0;
-  for (int y = -1; y <= 1; y++) {
-    for (int x = -1; x <= 1; x++) {
-      if (x != 0 && y != 0) continue;
-      ivec2 h = clamp(h0 + ivec2(x, y), ivec2(0), last);
-      vec4 sums = texelFetch(ao_half, h, 0);
-      float d = sums.b;
-      /* h was computed at full-resolution pixel 2h (the last column or row of an odd
-       * size aside, a pixel off: well inside the tolerance). */
-      float along = dot(vec2(h - h0) * 2.0, slope);
-      float height = d * (persp_along + perspective * along) + ortho_along +
-                     (1.0 - perspective) * along;
-      /* Background neighbours (depth 0, also the pixels with nothing to search) count for
-       * nothing. */
-      float weight = d > 0.0 ? clamp(1.0 - abs(height - center_height) * inv_tolerance,
-                                     0.0, 1.0) : 0.0;
-      visible += weight * sums.r;
-      open += weight * sums.g;
-    }
+  /* The pixel itself (on its own plane) and its four edge neighbours. */
+  float visible = own.r;
+  float open = own.g;
+  for (int i = 0; i < 4; i++) {
+    ivec2 offset = i < 2 ? ivec2(i * 2 - 1, 0) : ivec2(0, i * 2 - 5);
+    ivec2 h = clamp(h0 + offset, ivec2(0), last);
+    vec4 sums = texelFetch(ao_half, h, 0);
+    float d = sums.b;
+    /* h was computed at full-resolution pixel 2h (the last column or row of an odd size
+     * aside, a pixel off: well inside the tolerance). */
+    float along = dot(vec2(h - h0) * 2.0, slope);
+    float height = d * (persp_along + perspective * along) + ortho_along +
+                   (1.0 - perspective) * along;
+    /* Background neighbours (depth 0, also the pixels with nothing to search) count for
+     * nothing. */
+    float weight = d > 0.0 ? clamp(1.0 - abs(height - center_height) * inv_tolerance,
+                                   0.0, 1.0) : 0.0;
+    visible += weight * sums.r;
+    open += weight * sums.g;
   }
-  /* No neighbour on this surface (a sliver), or no open arc: its own value. */
-  float ao = open > 1e-6 ? visible / open : (own.g > 1e-6 ? own.r / own.g : 1.0);
+  /* No open arc at all (a slice with no part of the hemisphere's weight): open. */
+  float ao = open > 1e-6 ? visible / open : 1.0;
   out_ao_depth = vec2(clamp(ao, 0.0, 1.0), depth);
 }
 
