@@ -1,29 +1,32 @@
-/* Screen-space ambient occlusion: two programs from this one file.
+/* Screen-space ambient occlusion: two programs from this one file, both at half resolution.
  *
- * "ao" (half resolution): a GTAO-style horizon search (Jimenez et al. 2016, "Practical
- * Real-Time Strategies for Accurate Indirect Occlusion"). For AO_SLICES screen directions
- * per pixel it walks the depth buffer both ways, keeps the highest horizon on each side
- * within frame.ao_distance, and integrates the cosine-weighted visible arc between the two
- * horizons analytically. Averaged over all directions this is the fraction of the
+ * "ao": a GTAO-style horizon search (Jimenez et al. 2016, "Practical Real-Time Strategies
+ * for Accurate Indirect Occlusion"). Each pixel walks the depth buffer both ways along one
+ * screen direction (its slice), keeps the highest horizon on each side within
+ * frame.ao_distance, and integrates the cosine-weighted visible arc between the two
+ * horizons in closed form. Averaged over directions this is the fraction of the
  * cosine-weighted hemisphere not occluded within the distance, the quantity Cycles' AO
- * pass estimates by ray casting (1 = open sky, 0 = fully occluded). Each half-resolution
- * pixel takes its rotation from a 4x4 pattern, so a 4x4 neighbourhood sees 16 rotations.
+ * pass estimates by ray casting (1 = open sky, 0 = fully occluded). The direction comes
+ * from a 5-rotation pattern in which every pixel and its four edge neighbours hold all
+ * five. It writes the slice's visible arc, its arc with nothing above the tangent plane,
+ * and the view depth of the full-resolution pixel it stands for.
  *
- * "ao_blur" (AO_BLUR defined; half resolution too): a 4x4 depth-aware mean of the search's
- * result, which removes its 4x4 pattern. A neighbour counts only when its surface point
- * lies on the pixel's tangent plane (within a few pixel footprints), so occlusion does not
- * bleed across silhouettes and a grazing plane still blurs along itself. The lighting pass
- * brings it to full resolution (ambient_occlusion_at in ao_upsample.glsl).
+ * "ao_blur" (AO_BLUR defined): over the pixel and its four edge neighbours (all five
+ * directions), the visible arcs summed over the open arcs summed, which removes the
+ * pattern. A neighbour counts only when its surface point lies on the pixel's tangent
+ * plane (within a few pixel footprints), so occlusion does not bleed across silhouettes
+ * and a grazing plane still blurs along itself. Written as (AO, view depth); the lighting
+ * pass brings it to full resolution (ambient_occlusion_at in ao_upsample.glsl).
  *
- * NOTE: the blur runs at half resolution because at full resolution its 16 neighbours
- * for each of 4x as many pixels made it the larger half of the AO's cost on llvmpipe.
+ * NOTE (llvmpipe): the cost is the search's depth reads, and every full-screen pass costs
+ * a few milliseconds before it does anything; hence one slice per pixel and five blur
+ * taps rather than two slices and a 4x4 blur (the same error against Cycles or less,
+ * docs/ambient-occlusion.md), and the blur at half resolution. Pixels with nothing to
+ * search are kept out of the blur by a depth test, not an `if` (see the search's main).
  *
- * Inputs: the G-buffer's view depth (0 = background) and world normal. Both programs
- * write (AO, the view depth of the full-resolution pixel the value stands for), so the
- * blur and the lighting pass read one texel where they would read two. */
+ * Inputs: the G-buffer's view depth (0 = background) and world normal. */
 
 #define AO_PI 3.14159265358979
-#define AO_HALF_PI 1.57079632679490
 #define AO_STEPS 8             /* per side of a slice */
 #define AO_MAX_RADIUS 256.0    /* pixels: a nearby occluder farther on screen is missed */
 
@@ -76,9 +79,9 @@ float ao_acos(float x)
   return x >= 0.0 ? r : AO_PI - r;
 }
 
-/* The slice's share of the cosine-weighted visible arc on one side: horizon angle h (its
- * cosine c and sine s), the projected normal's angle n (cos_n, sin_n); GTAO's closed form
- * 0.25 (cos n + 2 h sin n - cos(2h - n)) without trigonometric calls. */
+/* Four times the slice's cosine-weighted visible arc on one side, GTAO's closed form
+ * cos n + 2 h sin n - cos(2h - n) for horizon angle h (its cosine c and sine s) and the
+ * projected normal's angle n (cos_n, sin_n), without trigonometric calls. */
 float ao_arc(float h, float c, float s, float cos_n, float sin_n)
 {
   float cos_2h_n = (2.0 * c * c - 1.0) * cos_n + 2.0 * s * c * sin_n;
@@ -114,9 +117,9 @@ void main()
    * rotation pattern. */
   float jitter = fract(52.9829189 * fract(dot(vec2(ao_pixel), vec2(0.06711056, 0.00583715))));
 
-  /* The visible arcs and the arcs with nothing above the tangent plane (the slices'
-   * shares of the cosine-weighted hemisphere) go to the blur as sums: it divides one by
-   * the other over the neighbourhood, so a pixel with nothing nearby is exactly 1. */
+  /* The visible arc and the arc with nothing above the tangent plane (the slice's share
+   * of the cosine-weighted hemisphere) go to the blur, which divides the sum of one by the
+   * sum of the other over its neighbourhood: a pixel with nothing nearby is exactly 1. */
   vec2 dir = ao_direction(ao_pixel);
   /* With square pixels, a screen direction is the same direction in view space, and the
    * plane through the eye, the pixel and that direction is the slice. */
@@ -180,16 +183,16 @@ void main()
   float visibility = n_proj_len * 0.25 * (arc_plus + arc_minus);
   /* The same with both horizons on the tangent plane (h = angle_n +- pi/2). */
   float open_sky = n_proj_len * (cos_n + angle_n * sin_n);
-  out_ao_sums = searched ? vec4(visibility, open_sky, depth, 0.0) : vec4(1.0, 1.0, depth, 0.0);
+  out_ao_sums = searched ? vec4(visibility, open_sky, depth, 0.0) :
+                         vec4(1.0, 1.0, depth, 0.0);
 }
 
 #else /* AO_BLUR */
 
-/* Half resolution: over the 3x3 half-resolution neighbourhood, which holds all 9 rotations
- * of the search's pattern, the visible arcs summed and divided by the open arcs summed,
- * keeping only neighbours on the pixel's tangent plane. Written with the view depth it
- * stands for, so the lighting pass can bring it to full resolution without bleeding across
- * silhouettes (out_ao_depth: AO, view depth; depth 0 = background). */
+/* Drawn only where the search searched (depth-tested); elsewhere the target keeps its
+ * cleared (1, 0): open, no surface. Writes the view depth the value stands for, so the
+ * lighting pass can bring it to full resolution without bleeding across silhouettes
+ * (out_ao_depth: AO, view depth). */
 void main()
 {
   ivec2 size = ivec2(frame.viewport_size);

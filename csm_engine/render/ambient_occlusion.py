@@ -1,10 +1,11 @@
 """The ambient-occlusion pass: a half-resolution horizon search over the G-buffer and a
 depth-aware blur (``ao_frag.glsl``), which the lighting pass brings to full resolution.
 
-Owns the two half-resolution AO targets and the record of what the blurred one holds (the
-frame cache's ``ambient_occlusion``): with the G-buffer kept from the frame before and the
-same AO inputs, the AO drawn then is kept too. Off (or at strength or distance 0), nothing
-is allocated or drawn.
+Owns the half-resolution AO targets (the search's arcs and depth, the blurred AO and depth,
+and a depth target saying which pixels were searched, which the blur is tested against)
+and the record of what the blurred one holds (the frame cache's ``ambient_occlusion``):
+with the G-buffer kept from the frame before and the same AO inputs, the AO drawn then is
+kept too. Off (or at strength or distance 0), nothing is allocated or drawn.
 """
 
 from typing import NamedTuple

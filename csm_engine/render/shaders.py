@@ -177,15 +177,15 @@ for _name in [name for name in PROGRAMS
         (("VEC4", "out_ids"),),
         defines=_spec.get("defines", ()) + (("CRYPTOMATTE", "1"),))
 
-# Screen-space ambient occlusion (ao_frag.glsl): the horizon search and a depth-aware blur,
-# both at half resolution; lighting brings it to full resolution and multiplies its ambient
-# term by the result.
+# Screen-space ambient occlusion (ao_frag.glsl): the horizon search (visible and open arcs,
+# view depth) and a depth-aware blur (AO, view depth), both at half resolution; lighting
+# brings it to full resolution and multiplies its ambient term by the result.
 _AO_COMMON = dict(vertex="fullscreen_vert.glsl", fragment="ao_frag.glsl",
                   inputs=(("pos", "VEC2"),), interface=(("screen_uv", "VEC2", "smooth"),),
                   push=(), frame=True)
 PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
                                             ("FLOAT_2D", "gbuffer_normal")),
-                      outputs=(("VEC4", "out_ao_sums"),))
+                      outputs=(("VEC4", "out_ao_sums"),), depth_write="ANY")
 PROGRAMS["ao_blur"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_normal"),
                                                  ("FLOAT_2D", "ao_half")),
                            outputs=(("VEC2", "out_ao_depth"),),
@@ -388,6 +388,10 @@ def _build(program_name, spec, directory, host_defines=()):
         info.uniform_buf(1, MATERIAL_LAYOUT.type_name, "material")
     for slot, (kind, name) in enumerate(spec["outputs"]):
         info.fragment_out(slot, kind, name)
+    # A program writing gl_FragDepth says so where the API can (5.0; Metal and Vulkan need
+    # it, OpenGL does not).
+    if spec.get("depth_write") and hasattr(info, "depth_write"):
+        info.depth_write(spec["depth_write"])
     defines = [*glsl_defines(), *material_defines(), *bsdf_tables.glsl_defines(),
                *host_defines, *spec.get("defines", ())]
     for name, value in defines:
