@@ -113,6 +113,8 @@ void main()
                     frame.ao_view_ray.zw;
   float perspective = frame.is_perspective != 0 ? 1.0 : 0.0;
   float fade = 1.0 / (0.05 * frame.ao_distance);
+  /* A sample clamped back onto the pixel itself is the pixel, whatever rounding says. */
+  float self_height = 1e-3 * ao_pixel_footprint(depth);
   /* Interleaved gradient noise (Jimenez 2014) for the step offsets, independent of the
    * rotation pattern. */
   float jitter = fract(52.9829189 * fract(dot(vec2(ao_pixel), vec2(0.06711056, 0.00583715))));
@@ -163,7 +165,7 @@ void main()
        * Points within ~1 degree of the tangent plane therefore never occlude; their
        * cosine weight is ~0. */
       float weight = clamp((frame.ao_distance - dist) * fade, 0.0, 1.0);
-      weight = (d > 0.0 && dot(delta, n) > 0.02 * dist) ? weight : 0.0;
+      weight = (d > 0.0 && dot(delta, n) > 0.02 * dist + self_height) ? weight : 0.0;
       float c = dot(delta, v) * inv_dist;
       if (side == 0) {
         cos_plus = max(cos_plus, mix(low_plus, c, weight));

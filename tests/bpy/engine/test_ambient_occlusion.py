@@ -92,6 +92,30 @@ def test_open_flat_ground_is_not_occluded(empty_scene, height, target):
     assert ao.mean() > 0.995 and np.percentile(ao, 1) > 0.97
 
 
+def test_pixels_whose_distance_is_inside_them_are_open(box_on_floor):
+    """A distance spanning a pixel or two on the far floor and a few pixels at the box:
+    the far floor stays open (no speckles where the search's steps are a pixel apart, nor
+    at the image border, where they are clamped onto the screen), the contact darkens.
+    A distance inside every pixel: nothing is searched, and every pixel is exactly 1."""
+    scene = box_on_floor
+    scene.csm.ao_distance = 0.08
+    scene.csm.debug_view = 'AMBIENT_OCCLUSION'
+    images = render_result(scene, 320, 240).images
+    gap = floor_gap(images)
+    ao = images["combined"][..., 0]
+    far = (gap > 8.0) & (gap < 12.0)
+    near = gap < 0.03
+    assert far.sum() > 500 and near.sum() > 20
+    print(f"distance 0.08: far floor AO min {ao[far].min():.6f}, at the box mean "
+          f"{ao[near].mean():.3f}")
+    assert ao[far].min() > 0.999
+    assert ao[near].mean() < 0.9
+    scene.csm.ao_distance = 0.001                  # inside every pixel
+    images = render_result(scene, 320, 240).images
+    covered = images["aux"][..., 3] > 0.5
+    assert np.all(images["combined"][..., 0][covered] == 1.0)
+
+
 def test_strength_zero_has_no_effect(box_on_floor):
     scene = box_on_floor
     scene.csm.ao_strength = 0.0
