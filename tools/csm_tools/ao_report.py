@@ -21,6 +21,10 @@ Outputs (``--out-dir``, default ``docs``): ``images/ao_<scene>.png`` (Cycles | C
 heat map side by side), ``ambient-occlusion.md`` (the tables between the markers below;
 the prose around them is left alone) and, with ``--json``, the numbers.
 
+``--cycles-cache DIR`` keeps Cycles' AO images there and reuses them on the next run with
+the same scene, distance, size and samples (Cycles' seed is fixed), so a change to CSM's AO
+is compared with the same reference in a fraction of the time.
+
 ``--quick`` is a smoke run for the tests: the operator scene only, small, few samples, and
 (unless ``--out-dir`` is given) a folder in the temp directory.
 """

@@ -73,3 +73,22 @@ def test_heatmap_colours_follow_the_sign_of_the_error():
     assert tuple(heat[2, 1]) == tuple(ao_report.COLOR_CSM_DARKER.astype(np.uint8))
     assert tuple(heat[2, 3]) == tuple(ao_report.COLOR_CSM_LIGHTER.astype(np.uint8))
     assert tuple(heat[0, 0]) == (0, 0, 0) and tuple(heat[0, 1]) == (0, 0, 0)
+
+
+def test_cycles_cache_reuses_a_render_of_the_same_scene_size_and_samples(tmp_path,
+                                                                          monkeypatch):
+    renders = []
+
+    def fake_cycles_ao(scene, distance, samples, folder):
+        renders.append((distance, samples))
+        return np.full((2, 3), 0.25 * len(renders))
+    monkeypatch.setattr(ao_report, "cycles_ao", fake_cycles_ao)
+    cache = str(tmp_path / "cycles")
+    first, seconds = ao_report.cached_cycles_ao(None, "blocks", 1.0, (3, 2), 16, cache)
+    again, seconds_again = ao_report.cached_cycles_ao(None, "blocks", 1.0, (3, 2), 16, cache)
+    assert renders == [(1.0, 16)]
+    assert np.array_equal(first, again) and seconds_again == seconds
+    more, _ = ao_report.cached_cycles_ao(None, "blocks", 1.0, (3, 2), 32, cache)
+    assert renders == [(1.0, 16), (1.0, 32)] and not np.array_equal(more, first)
+    ao_report.cached_cycles_ao(None, "blocks", 1.0, (3, 2), 16, None)   # no cache
+    assert len(renders) == 3
