@@ -415,7 +415,11 @@ def run(argv, prog=PROG):
     if cost:
         print(f"ao-report: AO pass {cost['ao']:.1f} ms at {COST_RESOLUTION[0]}x"
               f"{COST_RESOLUTION[1]} (lighting {cost['lighting']:.1f} ms)")
-    command = " ".join([prog, *argv]) if argv else prog
+    # Where the numbers and the Cycles renders were kept does not change the table.
+    shown = [a for i, a in enumerate(argv or ()) if not (
+        a in ("--json", "--cycles-cache") or a.startswith(("--json=", "--cycles-cache=")) or
+        (i > 0 and argv[i - 1] in ("--json", "--cycles-cache")))]
+    command = " ".join([prog, *shown])
     report_io.write_section(page, BEGIN, END, markdown(results, cost, resolution, samples,
                                                        command) + "\n",
                             title="Ambient occlusion")
