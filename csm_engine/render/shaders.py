@@ -96,38 +96,6 @@ PROGRAMS = {
         frame=False,
         outputs=(("VEC4", "out_color"),),
     ),
-    # A final render's FXAA in three passes (fxaa_frag.glsl): the lumas; the mark (a
-    # copy, depth 0 on edges); the blend where the depth test finds an edge.
-    "fxaa_luma": dict(
-        vertex="fullscreen_vert.glsl", fragment="fxaa_frag.glsl",
-        inputs=(("pos", "VEC2"),),
-        interface=(("screen_uv", "VEC2", "smooth"),),
-        push=(),
-        samplers=(("FLOAT_2D", "source"),),
-        frame=False,
-        outputs=(("VEC4", "out_color"), ("FLOAT", "out_luma")),
-        defines=(("FXAA_LUMA", "1"),),
-    ),
-    "fxaa_mark": dict(
-        vertex="fullscreen_vert.glsl", fragment="fxaa_frag.glsl",
-        inputs=(("pos", "VEC2"),),
-        interface=(("screen_uv", "VEC2", "smooth"),),
-        push=(),
-        samplers=(("FLOAT_2D", "luma"),),
-        frame=False,
-        outputs=(),
-        defines=(("FXAA_MARK", "1"),),
-    ),
-    "fxaa_blend": dict(
-        vertex="fullscreen_vert.glsl", fragment="fxaa_frag.glsl",
-        inputs=(("pos", "VEC2"),),
-        interface=(("screen_uv", "VEC2", "smooth"),),
-        push=(),
-        samplers=(("FLOAT_2D", "source"), ("FLOAT_2D", "luma")),
-        frame=False,
-        outputs=(("VEC4", "out_color"),),
-        defines=(("FXAA_BLEND", "1"),),
-    ),
     "depth_range": dict(
         vertex="fullscreen_vert.glsl", fragment="depth_range_frag.glsl",
         inputs=(("pos", "VEC2"),),
@@ -156,6 +124,15 @@ PROGRAMS = {
         outputs=(("VEC4", "out_color"),),
     ),
 }
+
+# A final render's FXAA in three passes (fxaa_frag.glsl, render/antialiasing.py): a copy
+# with the lumas; the edge mark (depth only); the edge walk where the mark's depth passes.
+PROGRAMS["fxaa_luma"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_LUMA", "1"),),
+                             outputs=(("VEC4", "out_color"), ("FLOAT", "out_luma")))
+PROGRAMS["fxaa_mark"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_MARK", "1"),),
+                             samplers=(("FLOAT_2D", "luma"),), outputs=())
+PROGRAMS["fxaa_blend"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_BLEND", "1"),),
+                              samplers=(("FLOAT_2D", "source"), ("FLOAT_2D", "luma")))
 
 # NOTE: a fragment shader that may ``discard`` turns off the rasterizer's early depth test,
 # so every hidden fragment runs the whole shader (llvmpipe: about half the G-buffer cost).
