@@ -248,14 +248,16 @@ class Pipeline:
         return antialiasing.draw_viewport_fxaa(self, snap, cache, width, height)
 
     def render_offscreen(self, snap, cache, reads=None, with_positions=False,
-                         passes=render_passes.NO_PASSES):
+                         passes=render_passes.NO_PASSES, memory=None):
         """Draw into offscreen float targets and read back only what ``reads`` names:
         image name ("combined", "aux", "normal") -> channels (1..4, from the first;
         default: combined and aux, RGBA); see ``readback.read_images``. With
         ``with_positions`` the G-buffer's world positions are added as "position" (tests
         ray-cast from them). ``passes`` (``passes.PassRequest``): the render passes to
         draw and return too, under their (Blender 5.0) names, with the Cryptomatte
-        metadata. Returns a ``RenderResult`` with what the passes drew."""
+        metadata. ``memory`` (``readback.ReadbackMemory``): read into memory kept between
+        renders (the images are then valid until the next render into it). Returns a
+        ``RenderResult`` with what the passes drew."""
         targets = self.targets
         width, height = snap.camera.width, snap.camera.height
         if reads is None:
@@ -290,7 +292,7 @@ class Pipeline:
         if lighting_passes:
             reads = dict(reads, **{name: 4 for name in render_passes.LIGHTING_PASS_TARGETS})
         images = read_images(snap, reads, final_fb, combined_fb, self.gbuffer_fb,
-                             with_positions)
+                             with_positions, memory)
         if self.first_sample_normals is not None:
             images["normal"] = self.first_sample_normals
         metadata = {}
