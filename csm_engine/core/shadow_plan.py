@@ -141,21 +141,21 @@ def plan_shadows(snap, bounds, depth_blocks=None, view_state=None):
                 # Manual: exactly the margin the user typed, nothing added.
                 scene_bounds=bounds if s.occluder_margin_auto else None,
                 receiver_cache=state.receiver_cache)
-            # NOTE: only viewport frames hold the last frame's fit (so the view does not
-            # pop while it moves); a final render depends on nothing but its own scene.
-            held_range, held_rectangles = \
-                (state.fitted_depth_range, state.receiver_rectangles) if snap.is_viewport \
-                else (None, None)
+            # NOTE: every view (a viewport, and the final render from one render to the
+            # next) keeps the last frame's fit while it still serves: the depth range
+            # while it holds the visible one, each cascade's box while it holds its
+            # receivers and is not much coarser than a fresh fit. A camera that moves a
+            # little then draws no shadow map again, and shadow edges do not pop.
             if depth_blocks is not None and len(depth_blocks[2]) and s.fit_to_visible:
                 fitted = cascades.visible_depth_range(
                     float(depth_blocks[2].min()), float(depth_blocks[3].max()),
-                    previous=held_range)
+                    previous=state.fitted_depth_range)
                 if fitted is not None:
                     # The fitted range has its own hybrid weight (Lambda (Fitted)): its
                     # near end is a surface, not the clip start (docs/soft-shadows.md).
                     arguments.update(depth_range=fitted, depth_blocks=depth_blocks,
-                                     previous_squares=held_rectangles,
                                      lam=float(s.fitted_split_lambda))
+            arguments.update(held=state.held_cascades)
             try:
                 result = cascades.compute_cascades(
                     camera.world_from_view, camera.projection, -snap.sun.to_light,
@@ -169,10 +169,8 @@ def plan_shadows(snap, bounds, depth_blocks=None, view_state=None):
                     camera.world_from_view, camera.projection, -snap.sun.to_light,
                     **arguments)
             warnings.extend(result.notes)
-            if "depth_range" in arguments:
-                state.fitted_depth_range = arguments["depth_range"]
-                state.receiver_rectangles = [fit.receiver_rectangle
-                                             for fit in result.cascades]
+            state.fitted_depth_range = arguments.get("depth_range")
+            state.held_cascades = list(result.cascades)
             if s.freeze_cascades:
                 state.frozen = FrozenCascades(result, camera)
                 frozen_camera = camera

@@ -24,11 +24,13 @@ class ShadowViewState:
     """One view's shadow-planning state, carried from frame to frame.
 
     - ``frozen``: ``FrozenCascades`` while Freeze Cascades is on, else None.
-    - ``fitted_depth_range``, ``receiver_rectangles``: the visible depth range and the
-      per-cascade receiver rectangles the cascades were last fitted to (Fit to Visible
-      Depth). A viewport frame holds them while the new ones still fit
-      (``cascades.visible_depth_range``, ``cascades.receiver_square``), so the cascades
-      do not pop while the view moves; a final render ignores them.
+    - ``fitted_depth_range``: the visible depth range the cascades were last fitted to
+      (Fit to Visible Depth), held while the new one still fits
+      (``cascades.visible_depth_range``), so the splits do not pop while the view moves.
+    - ``held_cascades``: the last frame's ``CascadeFit`` per cascade, each kept while it
+      still holds its receivers (``cascades.holding``): a view that moves a little keeps
+      its shadow maps. The final render keeps them from one render to the next too, so
+      the frames of a camera animation redraw their shadow maps only now and then.
     - ``receiver_cache``: the per-block terms of the last fit
       (``cascades.ReceiverTermsCache``), kept while the blocks and the camera stay.
 
@@ -39,7 +41,7 @@ class ShadowViewState:
         self.scene_name = scene_name
         self.frozen = None
         self.fitted_depth_range = None
-        self.receiver_rectangles = None
+        self.held_cascades = None
         self.receiver_cache = ReceiverTermsCache()
 
     def follow_scene(self, scene_name):

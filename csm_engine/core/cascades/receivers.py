@@ -207,6 +207,16 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
     return np.array(centre), np.array(half)
 
 
+def rounded_square(square, room=0.0):
+    """A receivers' rectangle (centre_xy, half widths) with each half width widened by
+    ``room`` (a share of it) and rounded up to 1/32 of its leading power of two, so the
+    texel size of a box fitted to it changes only in coarse steps."""
+    centre, half = square
+    return (np.asarray(centre, dtype=np.float64),
+            np.array([_round_up_dyadic(max(float(h) * (1.0 + room), 1e-9), bits=6)
+                      for h in half]))
+
+
 def visible_depth_range(nearest, farthest, previous=None, steps_per_octave=8,
                         shrink_below=0.75):
     """The depth range sample-distribution shadow maps fit the cascades to, from the
@@ -216,17 +226,24 @@ def visible_depth_range(nearest, farthest, previous=None, steps_per_octave=8,
     the ``previous`` range is kept while it still holds the new one and the new one's
     logarithmic span is not below ``shrink_below`` of it: small camera moves then leave the
     cascades exactly where they were (stabilized edges stay still, no re-rendered tiles),
-    and a range that only grows or shrinks a little does not pop. Returns (near, far) or
-    None when nothing is visible."""
+    and a range that only grows or shrinks a little does not pop. When the visible range
+    leaves the ``previous`` one, the end it left by is set one step further out: a camera
+    that keeps moving the same way then keeps the new range for a while too. Returns
+    (near, far) or None when nothing is visible."""
     if not (np.isfinite(nearest) and np.isfinite(farthest)) or not 0.0 < nearest <= farthest:
         return None
     step = math.log(2.0) / steps_per_octave
-    low = math.exp(math.floor(math.log(nearest) / step) * step)
-    high = math.exp(math.ceil(math.log(farthest) / step + 1e-9) * step)
+    low_step = math.floor(math.log(nearest) / step)
+    high_step = math.ceil(math.log(farthest) / step + 1e-9)
+    low, high = math.exp(low_step * step), math.exp(high_step * step)
     if previous is not None:
         old_low, old_high = previous
         if old_low <= low and old_high >= high and \
                 math.log(high / low) >= shrink_below * math.log(old_high / old_low):
             return previous
+        if low < old_low <= high:
+            low = math.exp((low_step - 1) * step)
+        if low <= old_high < high:
+            high = math.exp((high_step + 1) * step)
     return (low, high)
 
