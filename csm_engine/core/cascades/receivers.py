@@ -5,9 +5,9 @@ Owns the G-buffer's screen blocks as the planner reads them
 (``depth_blocks_from_reduction``), the visible depth range the splits divide
 (``visible_depth_range``), the rectangle each cascade's visible receivers need in the
 light's frame (``receiver_square``), and ``ReceiverTermsCache``, which keeps the per-block
-work of one view from frame to frame. The hysteresis that holds a range or a rectangle
-while it still fits is here too; what it holds from the frame before is passed in by the
-caller (``view_state.ShadowViewState`` keeps it per view). numpy only.
+work of one view from frame to frame. The hysteresis that holds a depth range while it
+still fits is here too; what it holds from the frame before is passed in by the caller
+(``view_state.ShadowViewState`` keeps it per view). numpy only.
 """
 
 import math
@@ -141,8 +141,7 @@ class ReceiverTermsCache:
 
 
 def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
-                    light_from_world_rot, previous=None, shrink_below=0.7, exact=False,
-                    cache=None):
+                    light_from_world_rot, exact=False, cache=None):
     """The rectangle (centre_xy, half_widths_xy) in the rotated light frame that holds every
     visible receiver between view depths ``near_depth`` and ``far_depth``, or None when no
     receiver is there.
@@ -150,12 +149,10 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
     ``blocks``: (ndc_low (N, 2), ndc_high (N, 2), nearest (N,), farthest (N,)): screen
     blocks and the view-depth range of what each shows (the G-buffer reduced on the GPU).
     Each block's part of the slice is a small frustum piece; its 8 corners bound it.
-    NOTE: each half width is rounded up to 1/32 of its leading power of two, and the
-    ``previous`` rectangle (centre, half widths) is kept while the receivers still fit in
-    it and it is less than 1/``shrink_below`` of what they need: small camera moves then
-    leave the cascade where it was, and the texel size changes rarely, by whole steps.
-    ``exact``: the receivers' own extent, neither rounded nor held (unstabilized
-    cascades).
+    NOTE: each half width is rounded up to 1/32 of its leading power of two
+    (``rounded_square``), so the texel size changes rarely, by whole steps; a box fitted
+    to it is kept while the receivers still fit (``holding``).
+    ``exact``: the receivers' own extent, not rounded.
     ``cache``: a ``ReceiverTermsCache`` to take the per-block terms from (None: computed
     here)."""
     _ndc_low, _ndc_high, nearest, farthest = blocks
@@ -191,20 +188,9 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
             greatest = (g_hi + np.maximum(*depth)).max()
         low.append(float(least) + float(offset[axis]))
         high.append(float(greatest) + float(offset[axis]))
-    centre = [0.5 * (lo + hi) for lo, hi in zip(low, high)]
-    if exact:
-        return np.array(centre), np.array([max(0.5 * (hi - lo), 1e-9)
-                                           for lo, hi in zip(low, high)])
-    half = [_round_up_dyadic(max(0.5 * (hi - lo), 1e-9), bits=6) for lo, hi in zip(low, high)]
-    if previous is not None:
-        old_centre, old_half = (np.asarray(v, dtype=np.float64) for v in previous)
-        # The whole previous rectangle, while it holds every receiver and is not much too
-        # big: the cascade then does not move at all (its shadow map can be kept).
-        if all(lo >= oc - oh and hi <= oc + oh and oh < h / shrink_below
-               for lo, hi, oc, oh, h in zip(low, high, old_centre.tolist(),
-                                            old_half.tolist(), half)):
-            return old_centre, old_half
-    return np.array(centre), np.array(half)
+    square = (np.array([0.5 * (lo + hi) for lo, hi in zip(low, high)]),
+              np.array([max(0.5 * (hi - lo), 1e-9) for lo, hi in zip(low, high)]))
+    return square if exact else rounded_square(square)
 
 
 def rounded_square(square, room=0.0):
