@@ -114,6 +114,7 @@ def plan_shadows(snap, bounds, depth_blocks=None, view_state=None):
     is frozen or held."""
     state = ShadowViewState() if view_state is None else view_state
     state.follow_scene(snap.scene_name)
+    state.follow_frame(snap)
     s = snap.settings
     camera = snap.camera
     tiles = []
@@ -141,11 +142,12 @@ def plan_shadows(snap, bounds, depth_blocks=None, view_state=None):
                 # Manual: exactly the margin the user typed, nothing added.
                 scene_bounds=bounds if s.occluder_margin_auto else None,
                 receiver_cache=state.receiver_cache)
-            # NOTE: every view (a viewport, and the final render from one render to the
-            # next) keeps the last frame's fit while it still serves: the depth range
-            # while it holds the visible one, each cascade's box while it holds its
-            # receivers and is not much coarser than a fresh fit. A camera that moves a
-            # little then draws no shadow map again, and shadow edges do not pop.
+            # NOTE: every view (a viewport, and the final render from one render of a
+            # frame to the next of the same frame: ``ShadowViewState.follow_frame``) keeps
+            # the last fit while it still serves: the depth range while it holds the
+            # visible one, each cascade's box while it holds its receivers and is not much
+            # coarser than a fresh fit. A camera that moves a little then draws no shadow
+            # map again, and shadow edges do not pop.
             if depth_blocks is not None and len(depth_blocks[2]) and s.fit_to_visible:
                 fitted = cascades.visible_depth_range(
                     float(depth_blocks[2].min()), float(depth_blocks[3].max()),

@@ -29,8 +29,11 @@ class ShadowViewState:
       (``cascades.visible_depth_range``), so the splits do not pop while the view moves.
     - ``held_cascades``: the last frame's ``CascadeFit`` per cascade, each kept while it
       still holds its receivers (``cascades.holding``): a view that moves a little keeps
-      its shadow maps. The final render keeps them from one render to the next too, so
-      the frames of a camera animation redraw their shadow maps only now and then.
+      its shadow maps. A final render keeps them (and the depth range) from the render
+      before only when both show the same frame number (``follow_frame``): F12 again
+      after a small camera move redraws no shadow map, while the frames of an animation
+      depend on nothing but their own frame, so any process (a farm's workers, ``-a``)
+      renders each frame to the same pixels.
     - ``receiver_cache``: the per-block terms of the last fit
       (``cascades.ReceiverTermsCache``), kept while the blocks and the camera stay.
 
@@ -42,6 +45,7 @@ class ShadowViewState:
         self.frozen = None
         self.fitted_depth_range = None
         self.held_cascades = None
+        self.frame = None
         self.receiver_cache = ReceiverTermsCache()
 
     def follow_scene(self, scene_name):
@@ -49,3 +53,13 @@ class ShadowViewState:
         shows another scene must not draw with the first one's cascades."""
         if scene_name != self.scene_name:
             self.__init__(scene_name)
+
+    def follow_frame(self, snap):
+        """Before planning ``snap`` (a ``FrameSnapshot``): a final render of another frame
+        number than the render before forgets the boxes and depth range that render was
+        fitted with (frozen cascades stay: Freeze Cascades holds them on purpose). A
+        viewport keeps them: its frames are one continuous stream."""
+        if not snap.is_viewport and snap.frame != self.frame:
+            self.held_cascades = None
+            self.fitted_depth_range = None
+        self.frame = snap.frame
