@@ -102,7 +102,7 @@ _CORNER_PICK = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)], dt
 _CORNER_PICK.setflags(write=False)
 
 
-def plan_shadows(snap, bounds, depth_blocks=None, view_state=None):
+def plan_shadows(snap, bounds, depth_blocks=None, view_state=None, casters=None):
     """Cascade splits and light matrices for this frame (the math is in ``cascades``).
     ``depth_blocks``: what the G-buffer shows per screen block
     (``depth_blocks_from_reduction``), measured when the Fit to Visible Depth setting is
@@ -110,11 +110,13 @@ def plan_shadows(snap, bounds, depth_blocks=None, view_state=None):
     and each cascade covers only its receivers. None: the cascades divide clip start ..
     shadow distance and cover their whole frustum slice.
     ``view_state``: the view's ``ShadowViewState``, read and updated (frozen cascades,
-    the last fit's depth range and receiver rectangles). None: a fresh one, so nothing
-    is frozen or held."""
+    the last fit's depth range and cascade boxes). None: a fresh one, so nothing is
+    frozen or held. ``casters``: what the scene's objects are (compared with ``==``, e.g.
+    their mesh keys and matrices); a final render keeps the render before's boxes only
+    for the same frame number and ``casters`` (``ShadowViewState.follow_frame``)."""
     state = ShadowViewState() if view_state is None else view_state
     state.follow_scene(snap.scene_name)
-    state.follow_frame(snap)
+    state.follow_frame(snap, casters)
     s = snap.settings
     camera = snap.camera
     tiles = []

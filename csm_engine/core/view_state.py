@@ -30,10 +30,10 @@ class ShadowViewState:
     - ``held_cascades``: the last frame's ``CascadeFit`` per cascade, each kept while it
       still holds its receivers (``cascades.holding``): a view that moves a little keeps
       its shadow maps. A final render keeps them (and the depth range) from the render
-      before only when both show the same frame number (``follow_frame``): F12 again
-      after a small camera move redraws no shadow map, while the frames of an animation
-      depend on nothing but their own frame, so any process (a farm's workers, ``-a``)
-      renders each frame to the same pixels.
+      before only when both show the same frame number and the same objects in the same
+      places (``follow_frame``): F12 again after a small camera move redraws no shadow
+      map, while the frames of an animation depend on nothing but their own frame, so
+      any process (a farm's workers, ``-a``) renders each frame to the same pixels.
     - ``receiver_cache``: the per-block terms of the last fit
       (``cascades.ReceiverTermsCache``), kept while the blocks and the camera stay.
 
@@ -45,7 +45,7 @@ class ShadowViewState:
         self.frozen = None
         self.fitted_depth_range = None
         self.held_cascades = None
-        self.frame = None
+        self.frame = None       # (frame number, casters) of the last plan
         self.receiver_cache = ReceiverTermsCache()
 
     def follow_scene(self, scene_name):
@@ -54,12 +54,15 @@ class ShadowViewState:
         if scene_name != self.scene_name:
             self.__init__(scene_name)
 
-    def follow_frame(self, snap):
-        """Before planning ``snap`` (a ``FrameSnapshot``): a final render of another frame
-        number than the render before forgets the boxes and depth range that render was
-        fitted with (frozen cascades stay: Freeze Cascades holds them on purpose). A
-        viewport keeps them: its frames are one continuous stream."""
-        if not snap.is_viewport and snap.frame != self.frame:
+    def follow_frame(self, snap, casters=None):
+        """Before planning ``snap`` (a ``FrameSnapshot``) of a scene whose objects are
+        ``casters`` (any value compared with ``==``: their meshes and matrices): a final
+        render of another frame number, or of other objects, than the render before
+        forgets the boxes and depth range that render was fitted with (frozen cascades
+        stay: Freeze Cascades holds them on purpose). A viewport keeps them: its frames
+        are one continuous stream."""
+        frame = (snap.frame, casters)
+        if not snap.is_viewport and frame != self.frame:
             self.held_cascades = None
             self.fitted_depth_range = None
-        self.frame = snap.frame
+        self.frame = frame
