@@ -19,10 +19,11 @@ from .instancing import column_major_f32
 from .resources import AtlasTiles, PartialMarks
 
 
-# NOTE: a stabilized cascade's x/y (texel-snapped) do not move with a small camera move, but
-# its depth range follows the camera by a little: a tile is kept when the depth row of its
-# light matrix moved by at most this (clip units, ~1e-4 mm over a 100 m range), far below
-# any depth bias, and compared with the matrix it was drawn with, so it cannot drift.
+# NOTE: a cascade kept from the frame before (core/cascades/holding.py) has the very same
+# light matrix; one refitted to the same box may differ in the depth row by rounding: a
+# tile is kept when that row moved by at most this (clip units, ~1e-4 mm over a 100 m
+# range), far below any depth bias, and compared with the matrix it was drawn with, so it
+# cannot drift.
 TILE_DEPTH_TOLERANCE = 1e-6
 
 
