@@ -51,9 +51,10 @@ class CascadeFit:
       ``compute_cascades``; NaN when fitted directly).
     - ``receiver_rectangle``: the (centre_xy, half widths) of the slice's visible
       receivers the box was narrowed to (``receivers.receiver_square``), or None.
-    - ``need_centre_xy``: the centre of what the box had to hold when it was fitted
-      (``holding.CascadeNeed``, rotated light frame; stabilized only): a box fitted later
-      is put ahead of where that moved (``holding.lead_box``).
+    - ``need_centre_xy``, ``need_half_xy``: the centre and half widths of what the box had
+      to hold when it was fitted (``holding.CascadeNeed``, rotated light frame; stabilized
+      only): a box fitted later is put ahead of where that moved (``holding.lead_box``),
+      with more room on an axis where it grew.
     """
 
     light_from_world: np.ndarray
@@ -73,6 +74,7 @@ class CascadeFit:
     texel_size_xy: np.ndarray = field(default_factory=lambda: np.full(2, math.nan))
     receiver_rectangle: tuple | None = None
     need_centre_xy: np.ndarray | None = None
+    need_half_xy: np.ndarray | None = None
 
     @property
     def world_from_light(self):
@@ -241,6 +243,7 @@ def _fit_checked(corners, rotation, resolution, stabilize, margin, scene_near,
                            high_xy=box.high_xy + shift)
     fresh = _cascade_from_box(box, rotation, resolution, stabilize, margin, scene_near)
     fresh.need_centre_xy = 0.5 * (need.low_xy + need.high_xy)
+    fresh.need_half_xy = 0.5 * (need.high_xy - need.low_xy)
     return hold_cascade(held, fresh, need) if compatible else fresh
 
 
@@ -390,6 +393,19 @@ def _cascade_from_box(box, rotation, resolution, stabilize, margin, scene_near):
 RECEIVER_ROOM = 1.0 / 32.0
 
 
+def _room(receivers, before):
+    """Per axis, the share of the receivers' half width a refitted box gets as room: none
+    for a view's first fit, ``RECEIVER_ROOM``, twice that on an axis where what the box
+    had to hold grew since the box before was fitted (a view turning toward a longer
+    stretch of ground keeps growing it)."""
+    if before is None:
+        return np.zeros(2)
+    if before.need_half_xy is None:
+        return np.full(2, RECEIVER_ROOM)
+    grew = np.asarray(receivers[1]) > before.need_half_xy
+    return np.where(grew, 2.0 * RECEIVER_ROOM, RECEIVER_ROOM)
+
+
 @dataclass
 class CascadeSet:
     """All cascades of one frame: ``cascades[i]`` covers view depths
@@ -513,7 +529,7 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
                                         slice_near, splits[index + 1], rotation, exact=True,
                                         cache=receiver_cache)
             square = receivers if receivers is None or not stabilize else \
-                rounded_square(receivers, 0.0 if before is None else RECEIVER_ROOM)
+                rounded_square(receivers, _room(receivers, before))
         fit = _fit_checked(_slice_corners(corners), rotation[:3, :3], resolution,
                            stabilize, margin, scene_near, sphere, square, before, receivers)
         fit.receiver_rectangle = square

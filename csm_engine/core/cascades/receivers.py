@@ -195,12 +195,13 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
 
 def rounded_square(square, room=0.0):
     """A receivers' rectangle (centre_xy, half widths) with each half width widened by
-    ``room`` (a share of it) and rounded up to 1/32 of its leading power of two, so the
-    texel size of a box fitted to it changes only in coarse steps."""
+    ``room`` (a share of it; one, or one per axis) and rounded up to 1/32 of its leading
+    power of two, so the texel size of a box fitted to it changes only in coarse steps."""
     centre, half = square
+    rooms = np.broadcast_to(np.asarray(room, dtype=np.float64), (2,)).tolist()
     return (np.asarray(centre, dtype=np.float64),
-            np.array([_round_up_dyadic(max(float(h) * (1.0 + room), 1e-9), bits=6)
-                      for h in half]))
+            np.array([_round_up_dyadic(max(float(h) * (1.0 + r), 1e-9), bits=6)
+                      for h, r in zip(half, rooms)]))
 
 
 def visible_depth_range(nearest, farthest, previous=None, steps_per_octave=8,
