@@ -1,7 +1,7 @@
-"""The G-buffer culls the back faces of a big closed solid the camera sees from outside
-(render/gbuffer.py ``seen_from_outside``, render/draw_lists.py ``closed_outward``): the
-picture must stay what drawing every face gives, and a camera inside a solid must still see
-its walls.
+"""The G-buffer culls the back faces of a big closed solid the camera sees from outside,
+the shadow pass those turned away from the light (render/gbuffer.py ``seen_from_outside``,
+render/shadow_atlas.py, render/draw_lists.py ``closed_outward``): the picture must stay
+what drawing every face gives, and a camera inside a solid must still see its walls.
 """
 import bpy
 import numpy as np
@@ -94,3 +94,29 @@ def test_a_camera_inside_a_solid_still_sees_its_walls(empty_scene, monkeypatch):
     assert np.array_equal(with_culling, plain)
     coverage = render_result(scene, W, H).images["aux"][..., 3]
     assert coverage.min() > 0.5, "every pixel shows the sphere's inside"
+
+
+def test_the_shadow_maps_of_a_solid_without_its_far_side_are_the_same(empty_scene,
+                                                                       monkeypatch):
+    """The shadow pass draws a closed solid wholly beyond a cascade's near plane without
+    the faces turned away from the light: the nearest depth each texel keeps is the
+    same, so are the shadows."""
+    from csm_engine.blender import engine
+    from csm_engine.render import shadow_atlas
+    scene = _scene(empty_scene, (0, -5, 3), (np.radians(65), 0, 0))
+    culled = []
+    real = shadow_atlas._solids_beyond_near
+
+    def spy(instances, tile, visible):
+        solids = real(instances, tile, visible)
+        culled.append(solids is not None and bool(solids.any()))
+        return solids
+    monkeypatch.setattr(shadow_atlas, "_solids_beyond_near", spy)
+    engine.forget_final_render_passes()
+    with_culling = render_result(scene, W, H).images["aux"][..., 0].copy()
+    assert any(culled), "the sphere was drawn without its far side"
+    monkeypatch.setattr(shadow_atlas, "_solids_beyond_near", lambda *args: None)
+    engine.forget_final_render_passes()
+    plain = render_result(scene, W, H).images["aux"][..., 0].copy()
+    assert (plain < 0.5).mean() > 0.01, "the sphere casts a shadow in view"
+    assert np.abs(with_culling - plain).max() < 1e-6
