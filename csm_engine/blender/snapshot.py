@@ -293,7 +293,7 @@ def take(depsgraph, camera, is_viewport=False):
                          warnings=warnings,
                          film_transparent=bool(scene.render.film_transparent),
                          pixel_filter_width=float(getattr(scene.render, "filter_size", 1.5)),
-                         is_viewport=bool(is_viewport),
+                         is_viewport=bool(is_viewport), frame=int(scene.frame_current),
                          scene_name=scene.name)
     # A uniform World of radiance L: a diffuse surface receives the irradiance pi * L and
     # sends back albedo/pi of it, so ambient light is L * albedo, as in EEVEE. An
