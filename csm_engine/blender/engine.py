@@ -23,6 +23,7 @@ import bpy
 
 from ..core.view_state import ShadowViewState
 from ..render import gpu_mesh, overlays, pipeline, shaders
+from ..render.readback import ReadbackMemory
 from ..render.resources import RenderResources
 from ..render.result import RenderResult
 from . import compat, mesh_cache, render_passes, snapshot
@@ -41,6 +42,10 @@ _FINAL_RENDER_VIEW = ShadowViewState()
 # and frees the old ones through their own context (gl_batch.cc, GLVaoCache::context_check).
 # Meshes the scene no longer uses are dropped inside the next render (MeshCache.sync).
 _FINAL_RENDER_MESHES = []
+# Read-back buffers and the contiguous pass copies handed to Blender, kept from one final
+# render to the next (render/readback.py: fresh blocks that size cost page faults each
+# frame); used when the caller does not keep the images.
+_FINAL_RENDER_MEMORY = ReadbackMemory()
 
 
 class _Request:
@@ -215,8 +220,10 @@ class CSMRenderEngine(bpy.types.RenderEngine):
                                      view_state=_FINAL_RENDER_VIEW)
         renderer.profile = request.profile
         wanted = render_passes.request(depsgraph.view_layer, scene.world)
+        memory = None if request.keep_images else _FINAL_RENDER_MEMORY
         result = renderer.render_offscreen(snap, cache, _reads(wanted, request.keep_images),
-                                           with_positions=request.keep_images, passes=wanted)
+                                           with_positions=request.keep_images, passes=wanted,
+                                           memory=memory)
         result.timings.update(scene_read=scene_read, mesh_upload=mesh_upload)
         result.mesh_uploads, result.upload_bytes = gpu_mesh.uploads_since(
             cache.meshes.values(), mark)
@@ -231,11 +238,14 @@ class CSMRenderEngine(bpy.types.RenderEngine):
         # Blender calls render() once per view layer: this one's passes go to its own layer.
         render_result = self.begin_result(0, 0, x1 - x0, y1 - y0,
                                           layer=depsgraph.view_layer.name)
-        compat.write_pass(render_result.layers[0].passes["Combined"],
-                          region_images["combined"])
+        combined = region_images["combined"]
+        if memory is not None:
+            combined = memory.contiguous("Combined", combined)
+        compat.write_pass(render_result.layers[0].passes["Combined"], combined)
         aux = region_images["aux"]
         region_images.update(Shadow=aux[..., 0:1], Cascade=aux[..., 1:2])
-        render_passes.write(self, render_result, region_images, wanted, result.metadata)
+        render_passes.write(self, render_result, region_images, wanted, result.metadata,
+                            memory)
         self.end_result(render_result)
         result.timings["handoff"] = time.perf_counter() - t
         if not request.keep_images:
@@ -501,6 +511,7 @@ def release_gpu_resources(exiting=True):
     Called when the add-on is disabled and when Python exits: Blender counts anything still
     alive then as leaked and prints "Not freed memory blocks" at exit."""
     _FINAL_RENDER_RESOURCES.clear()
+    _FINAL_RENDER_MEMORY.clear()
     for cache in _FINAL_RENDER_MESHES:
         cache.clear()
     shaders.LIBRARY.release()

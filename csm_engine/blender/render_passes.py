@@ -86,11 +86,12 @@ def _fit_channels(pixels, channels):
     return pixels[..., :channels]
 
 
-def write(engine, render_result, images, wanted, metadata):
+def write(engine, render_result, images, wanted, metadata, memory=None):
     """Write ``images`` (pass name -> (H, W, C), already cut to the result's region) into
     ``render_result``'s first layer for every pass ``wanted`` writes, and ``metadata``
     into the render's stamp data. A pass Blender did not allocate is added where Blender
-    allows."""
+    allows. ``memory`` (``render.readback.ReadbackMemory``): where a channel or region
+    of an image is made contiguous for Blender, kept between renders."""
     passes = render_result.layers[0].passes
     for name, spec in _specs(wanted):
         pixels = images.get(spec.name)
@@ -106,7 +107,10 @@ def write(engine, render_result, images, wanted, metadata):
             render_pass = passes.find_by_name(name, "")
             if render_pass is None:
                 continue
-        compat.write_pass(render_pass, _fit_channels(pixels, render_pass.channels))
+        pixels = _fit_channels(pixels, render_pass.channels)
+        if memory is not None:
+            pixels = memory.contiguous(name, pixels)
+        compat.write_pass(render_pass, pixels)
     # NOTE: the stamp data of the render itself (get_result, as Cycles writes its
     # Cryptomatte metadata): ``begin_result``'s result is merged into it by its pixels
     # alone, so fields added there never reach the image or a file.

@@ -278,8 +278,8 @@ _MESH_TYPES = frozenset({'MESH', 'CURVE', 'SURFACE', 'FONT', 'META'})
 
 def _no_faces(original):
     """Whether an object's own (unevaluated) mesh has no faces. Asked before the evaluated
-    mesh: reading an evaluated mesh's faces makes Blender finish evaluating it (a live
-    Subdivision modifier runs then), which a final render whose meshes are unchanged
+    mesh: even reading an evaluated object's ``data`` makes Blender finish evaluating it (a
+    live Subdivision modifier runs then), which a final render whose meshes are unchanged
     never needs (``mesh_cache.recipe``)."""
     mesh = getattr(original, "data", None) if original is not None else None
     return mesh is None or not len(getattr(mesh, "polygons", ()))
@@ -293,7 +293,7 @@ def take(depsgraph, camera, is_viewport=False):
                          warnings=warnings,
                          film_transparent=bool(scene.render.film_transparent),
                          pixel_filter_width=float(getattr(scene.render, "filter_size", 1.5)),
-                         is_viewport=bool(is_viewport),
+                         is_viewport=bool(is_viewport), frame=int(scene.frame_current),
                          scene_name=scene.name)
     # A uniform World of radiance L: a diffuse surface receives the irradiance pi * L and
     # sends back albedo/pi of it, so ambient light is L * albedo, as in EEVEE. An
@@ -330,8 +330,8 @@ def take(depsgraph, camera, is_viewport=False):
                 _add_light(snap, obj, _matrix(instance.matrix_world), light_threshold)
         elif kind in _MESH_TYPES:
             original = obj.original
-            if kind == 'MESH' and not instance.is_instance and obj.data is not None and \
-                    _no_faces(original) and not len(obj.data.polygons):
+            if kind == 'MESH' and not instance.is_instance and _no_faces(original) and \
+                    obj.data is not None and not len(obj.data.polygons):
                 # Nothing to draw, and no bounds to add: e.g. an object whose Geometry
                 # Nodes make only instances (the copies of a mesh file), which come next.
                 continue

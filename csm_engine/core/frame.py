@@ -82,6 +82,7 @@ class FrameSnapshot:
     pixel_filter_width: float = 1.5    # Film > Filter Size (pixels): final-render AA spread
     sample_index: int = 0       # jittered sample of a final render (0: the first, unjittered)
     is_viewport: bool = False   # a viewport frame (one of a continuous stream) or a render
+    frame: int = 0              # the scene's frame number (Timeline > Current Frame)
     scene_name: str = ""
     warnings: list = field(default_factory=list)      # what the snapshot had to correct
 

@@ -102,7 +102,7 @@ _CORNER_PICK = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)], dt
 _CORNER_PICK.setflags(write=False)
 
 
-def plan_shadows(snap, bounds, depth_blocks=None, view_state=None):
+def plan_shadows(snap, bounds, depth_blocks=None, view_state=None, casters=None):
     """Cascade splits and light matrices for this frame (the math is in ``cascades``).
     ``depth_blocks``: what the G-buffer shows per screen block
     (``depth_blocks_from_reduction``), measured when the Fit to Visible Depth setting is
@@ -110,10 +110,13 @@ def plan_shadows(snap, bounds, depth_blocks=None, view_state=None):
     and each cascade covers only its receivers. None: the cascades divide clip start ..
     shadow distance and cover their whole frustum slice.
     ``view_state``: the view's ``ShadowViewState``, read and updated (frozen cascades,
-    the last fit's depth range and receiver rectangles). None: a fresh one, so nothing
-    is frozen or held."""
+    the last fit's depth range and cascade boxes). None: a fresh one, so nothing is
+    frozen or held. ``casters``: what the scene's objects are (compared with ``==``, e.g.
+    their mesh keys and matrices); a final render keeps the render before's boxes only
+    for the same frame number and ``casters`` (``ShadowViewState.follow_frame``)."""
     state = ShadowViewState() if view_state is None else view_state
     state.follow_scene(snap.scene_name)
+    state.follow_frame(snap, casters)
     s = snap.settings
     camera = snap.camera
     tiles = []
@@ -141,21 +144,22 @@ def plan_shadows(snap, bounds, depth_blocks=None, view_state=None):
                 # Manual: exactly the margin the user typed, nothing added.
                 scene_bounds=bounds if s.occluder_margin_auto else None,
                 receiver_cache=state.receiver_cache)
-            # NOTE: only viewport frames hold the last frame's fit (so the view does not
-            # pop while it moves); a final render depends on nothing but its own scene.
-            held_range, held_rectangles = \
-                (state.fitted_depth_range, state.receiver_rectangles) if snap.is_viewport \
-                else (None, None)
+            # NOTE: every view (a viewport, and the final render from one render of a
+            # frame to the next of the same frame: ``ShadowViewState.follow_frame``) keeps
+            # the last fit while it still serves: the depth range while it holds the
+            # visible one, each cascade's box while it holds its receivers and is not much
+            # coarser than a fresh fit. A camera that moves a little then draws no shadow
+            # map again, and shadow edges do not pop.
             if depth_blocks is not None and len(depth_blocks[2]) and s.fit_to_visible:
                 fitted = cascades.visible_depth_range(
                     float(depth_blocks[2].min()), float(depth_blocks[3].max()),
-                    previous=held_range)
+                    previous=state.fitted_depth_range)
                 if fitted is not None:
                     # The fitted range has its own hybrid weight (Lambda (Fitted)): its
                     # near end is a surface, not the clip start (docs/soft-shadows.md).
                     arguments.update(depth_range=fitted, depth_blocks=depth_blocks,
-                                     previous_squares=held_rectangles,
                                      lam=float(s.fitted_split_lambda))
+            arguments.update(held=state.held_cascades)
             try:
                 result = cascades.compute_cascades(
                     camera.world_from_view, camera.projection, -snap.sun.to_light,
@@ -169,10 +173,8 @@ def plan_shadows(snap, bounds, depth_blocks=None, view_state=None):
                     camera.world_from_view, camera.projection, -snap.sun.to_light,
                     **arguments)
             warnings.extend(result.notes)
-            if "depth_range" in arguments:
-                state.fitted_depth_range = arguments["depth_range"]
-                state.receiver_rectangles = [fit.receiver_rectangle
-                                             for fit in result.cascades]
+            state.fitted_depth_range = arguments.get("depth_range")
+            state.held_cascades = list(result.cascades)
             if s.freeze_cascades:
                 state.frozen = FrozenCascades(result, camera)
                 frozen_camera = camera

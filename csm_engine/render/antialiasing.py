@@ -5,6 +5,8 @@ Owns ``draw_viewport_fxaa`` and ``draw_antialiased``, which drive ``Pipeline.dra
 each sample with a snapshot of their own (the jittered camera and sample index; the
 caller's snapshot is never changed), and the frozen-cascade overlays after anti-aliasing,
 so 1-pixel lines stay crisp. Sample offsets and weights come from core/antialiasing.py.
+A final render's FXAA runs in three passes (``_draw_final_fxaa``) so that only pixel blocks
+with an edge run the edge walk; the viewport's in one, into Blender's framebuffer.
 """
 
 import dataclasses
@@ -78,7 +80,7 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, reque
     color_fb = targets.framebuffer("final_color_only", colors=(color,))
     t = time.perf_counter()
     if use_fxaa:
-        targets.fullscreen_pass("fxaa", color_fb, width, height, (("source", lit),))
+        _draw_final_fxaa(targets, lit, color, width, height)
         draw_overlays(snap, plan, color_fb, width, height)
         timings["fxaa"] = time.perf_counter() - t
         timings["total"] = timings.get("total", 0.0) + timings["fxaa"]
@@ -122,6 +124,41 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, reque
     timings["total"] = time.perf_counter() - started
     draw_overlays(snap, plan, mean_fb, width, height)
     return Antialiased(plan, mean_fb, timings, passes)
+
+
+def _draw_final_fxaa(targets, lit, color, width, height):
+    """FXAA from ``lit`` into ``color`` in three passes (fxaa_frag.glsl): a copy of every
+    pixel with its luma into a target of its own; the mark, depth 0 on edge pixels (depth
+    only); and the blend, the edge walk under a depth test, so llvmpipe shades only the
+    pixel blocks that hold an edge pixel. The same pixels as the one-pass program."""
+    import gpu
+    luma = targets.texture("fxaa_luma", (width, height), 'R32F')
+    mask = targets.texture("fxaa_mask", (width, height), 'DEPTH_COMPONENT32F')
+    targets.fullscreen_pass("fxaa_luma", targets.framebuffer("fxaa_luma", colors=(color, luma)),
+                            width, height, (("source", lit),))
+    batch = targets.fullscreen_batch()
+    for program, framebuffer in (
+            ("fxaa_mark", targets.framebuffer("fxaa_mark", depth=mask)),
+            ("fxaa_blend", targets.framebuffer("fxaa_blend", depth=mask, colors=(color,)))):
+        with framebuffer.bind():
+            gpu.state.viewport_set(0, 0, width, height)
+            gpu.state.blend_set('NONE')
+            if program == "fxaa_mark":
+                gpu.state.depth_test_set('ALWAYS')
+                gpu.state.depth_mask_set(True)
+            else:
+                # The full-screen triangle lies at depth 1: it passes where the mark wrote 0.
+                gpu.state.depth_test_set('GREATER')
+                gpu.state.depth_mask_set(False)
+            shader = shaders.LIBRARY.get(program)
+            shader.bind()
+            shader.uniform_sampler("luma", luma)
+            if program == "fxaa_blend":
+                shader.uniform_sampler("source", lit)
+            targets.call(batch.draw, shader)
+            gpu.state.depth_test_set('NONE')
+            if targets.profile and program == "fxaa_blend":   # wait for the GPU
+                framebuffer.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
 
 
 def _accumulate_in_place(targets, slot, mean, sample, share, width, height):

@@ -7,7 +7,10 @@ object, material and asset IDs (render/passes.py); materials are one uniform blo
 (core/material_layout.py). World positions are rebuilt from view depth where needed
 (``core.camera.world_positions``). Also owns ``GBufferContents``: what a G-buffer drawn now
 would hold, so that one the targets already hold is not drawn again (F12 after a shadow or
-light setting changed; an unchanged re-render; a viewport redraw of an unmoved view).
+light setting changed; an unchanged re-render; a viewport redraw of an unmoved view), and
+``seen_from_outside``: the big closed solids the camera sees from outside, whose back faces
+are culled (hidden behind their front faces; on llvmpipe a geometry-bound mesh then costs
+about half).
 """
 
 from typing import NamedTuple
@@ -17,7 +20,7 @@ import numpy as np
 from ..core.frame_layout import FRAME_LAYOUT
 from ..core.shadow_plan import front_to_back
 from . import instancing, passes, shaders
-from .draw_lists import GBUFFER_PROGRAMS, MATERIAL_SAMPLERS
+from .draw_lists import GBUFFER_PROGRAMS, MATERIAL_SAMPLERS, closed_outward
 from .resources import HeldGBuffer
 
 # What the G-buffer programs read of the frame block (gbuffer_vert/frag.glsl).
@@ -116,8 +119,9 @@ kept)."""
     # Cryptomatte frames draw every copy on its own in both draws, so that the second
     # draw's depths equal the first's and its depth test (LESS_EQUAL) passes where the
     # first draw's surfaces are.
+    solids = seen_from_outside(snap.camera, instances)
     _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuffer_fb,
-          width, height, instancing_allowed=ids is None)
+          width, height, instancing_allowed=ids is None, solids=solids)
     if ids is not None:
         # Background pixels keep no IDs of an earlier sample.
         clear_fb = targets.framebuffer("gbuffer_ids_clear", colors=(id_target,))
@@ -127,7 +131,7 @@ kept)."""
                                      colors=(albedo, normal, view_depth, facet, emission,
                                              id_target))
         _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, ids_fb,
-              width, height, ids, instancing_allowed=False, clear=False)
+              width, height, ids, instancing_allowed=False, clear=False, solids=solids)
     if contents is not None and targets.records:
         frame_cache.gbuffer = HeldGBuffer(drawn_into, contents)
     return gbuffer, False
@@ -165,8 +169,31 @@ def _keep_zero(targets, marker, texture, written):
         setattr(targets, marker, texture)
 
 
+def seen_from_outside(camera, instances):
+    """Per instance: whether its mesh is a closed solid wound outward
+    (``draw_lists.closed_outward``) that the camera sees only from outside: a perspective
+    camera whose near plane's corners (and so its whole near plane) stay out of the
+    instance's world box. Its back faces are then all hidden behind its front faces, and
+    the G-buffer culls them."""
+    count = len(instances.meshes)
+    bounds = instances.bounds_lo_hi
+    if not count or bounds is None or not camera.is_perspective:
+        return np.zeros(count, dtype=bool)
+    left, right, bottom, top = camera.projection.view_window()
+    reach = camera.clip_start * float(np.sqrt(1.0 + max(abs(left), abs(right)) ** 2 +
+                                              max(abs(bottom), abs(top)) ** 2))
+    position = camera.position
+    gap = np.maximum(np.maximum(bounds[0] - position, position - bounds[1]), 0.0)
+    outside = np.einsum("ij,ij->i", gap, gap) > (1.01 * reach + 1e-6) ** 2
+    return outside & np.fromiter((closed_outward(mesh) for mesh in instances.meshes),
+                                 dtype=bool, count=count)
+
+
 def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuffer_fb,
-          width, height, ids=None, instancing_allowed=True, clear=True):
+          width, height, ids=None, instancing_allowed=True, clear=True, solids=None):
+    """Draw ``order``'s instances into ``gbuffer_fb``. ``solids``: per instance, whether
+    its back faces may be culled (``seen_from_outside``); alpha-masked materials never
+    are (their holes show the inside)."""
     import gpu
     items = lists.items
     mirrored = instances.mirrored
@@ -191,6 +218,8 @@ def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuff
         for program, runs in per_program:
             for run in runs:
                 index = int(run[0])
+                solid = solids is not None and program.draws != "masked" and \
+                    bool(solids[run].all())
                 if len(run) > 1:
                     shader = state.use(program, True, frame_ubo, False)
                     shader.uniform_sampler("instance_matrices", matrices)
@@ -211,7 +240,7 @@ def _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, gbuff
                     shader.uniform_float("terminator_offset", float(state.offset))
                 for batch, material in getattr(items[index], program.draws):
                     wanted = ('FRONT' if mirrored[index] else 'BACK') \
-                        if material.backface_culling else 'NONE'
+                        if material.backface_culling or solid else 'NONE'
                     if wanted != state.culling:
                         gpu.state.face_culling_set(wanted)
                         state.culling = wanted

@@ -104,14 +104,17 @@ class Pipeline:
     def benchmark_skip_gpu_calls(self, value):
         self.targets.benchmark_skip_gpu_calls = value
 
-    def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False):
+    def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False, instances=None):
         """This view's shadow planning, the one place the pipeline calls the planner: the
         frame's plan (``depth_blocks``: the visible depths Fit to Visible Depth fits to),
         or with ``gbuffer_only`` the plan a Fit to Visible Depth frame draws its G-buffer
-        with before those depths are known."""
+        with before those depths are known. ``instances`` (``InstanceArrays``): the
+        objects, whose meshes and matrices a final render's boxes are kept for."""
         if gbuffer_only:
             return gbuffer_plan(snap, bounds, view_state=self.view_state)
-        return plan_shadows(snap, bounds, depth_blocks, view_state=self.view_state)
+        casters = None if instances is None else (instances.keys, instances.matrix_bytes)
+        return plan_shadows(snap, bounds, depth_blocks, view_state=self.view_state,
+                            casters=casters)
 
     def _warn(self, messages):
         self.warnings.extend(w for w in messages if w not in self.warnings)
@@ -158,7 +161,7 @@ class Pipeline:
         # fields (the G-buffer reads only the camera from it).
         fit_to_visible = plan is None and bool(snap.settings.fit_to_visible)
         if plan is None:
-            plan = self._plan(snap, bounds, gbuffer_only=fit_to_visible)
+            plan = self._plan(snap, bounds, gbuffer_only=fit_to_visible, instances=instances)
         self._warn(snap.warnings + plan.warnings)
         # Allocated before the frame block is packed: a failed allocation halves the
         # plan's resolutions, which the block carries.
@@ -197,7 +200,7 @@ class Pipeline:
             gbuffer, gbuffer_kept, t = gbuffer_pass(t)
             blocks = self.visible_depth.blocks(targets, gbuffer, gbuffer_kept, width, height)
             t = self._sync(gbuffer.framebuffer, "depth_range", t)
-            plan = self._plan(snap, bounds, blocks)
+            plan = self._plan(snap, bounds, blocks, instances=instances)
             self._warn(plan.warnings)
             atlas = allocate_atlas(targets, plan, self.warnings)
             frame_ubo = targets.frame_ubo(pack_frame(snap, plan, like=frame_data))
@@ -248,14 +251,16 @@ class Pipeline:
         return antialiasing.draw_viewport_fxaa(self, snap, cache, width, height)
 
     def render_offscreen(self, snap, cache, reads=None, with_positions=False,
-                         passes=render_passes.NO_PASSES):
+                         passes=render_passes.NO_PASSES, memory=None):
         """Draw into offscreen float targets and read back only what ``reads`` names:
         image name ("combined", "aux", "normal") -> channels (1..4, from the first;
         default: combined and aux, RGBA); see ``readback.read_images``. With
         ``with_positions`` the G-buffer's world positions are added as "position" (tests
         ray-cast from them). ``passes`` (``passes.PassRequest``): the render passes to
         draw and return too, under their (Blender 5.0) names, with the Cryptomatte
-        metadata. Returns a ``RenderResult`` with what the passes drew."""
+        metadata. ``memory`` (``readback.ReadbackMemory``): read into memory kept between
+        renders (the images are then valid until the next render into it). Returns a
+        ``RenderResult`` with what the passes drew."""
         targets = self.targets
         width, height = snap.camera.width, snap.camera.height
         if reads is None:
@@ -290,7 +295,7 @@ class Pipeline:
         if lighting_passes:
             reads = dict(reads, **{name: 4 for name in render_passes.LIGHTING_PASS_TARGETS})
         images = read_images(snap, reads, final_fb, combined_fb, self.gbuffer_fb,
-                             with_positions)
+                             with_positions, memory)
         if self.first_sample_normals is not None:
             images["normal"] = self.first_sample_normals
         metadata = {}

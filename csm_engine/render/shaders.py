@@ -125,6 +125,15 @@ PROGRAMS = {
     ),
 }
 
+# A final render's FXAA in three passes (fxaa_frag.glsl, render/antialiasing.py): a copy
+# with the lumas; the edge mark (depth only); the edge walk where the mark's depth passes.
+PROGRAMS["fxaa_luma"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_LUMA", "1"),),
+                             outputs=(("VEC4", "out_color"), ("FLOAT", "out_luma")))
+PROGRAMS["fxaa_mark"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_MARK", "1"),),
+                             samplers=(("FLOAT_2D", "luma"),), outputs=())
+PROGRAMS["fxaa_blend"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_BLEND", "1"),),
+                              samplers=(("FLOAT_2D", "source"), ("FLOAT_2D", "luma")))
+
 # NOTE: a fragment shader that may ``discard`` turns off the rasterizer's early depth test,
 # so every hidden fragment runs the whole shader (llvmpipe: about half the G-buffer cost).
 # Opaque materials therefore draw with programs that cannot discard; alpha-masked

@@ -2,8 +2,10 @@
 face) in one atlas, and beside it a one-byte partial-caster mask.
 
 Owns the atlas and mask textures' allocation (``allocate_atlas``), caster culling per tile,
-the tiles' draws, and the records of what each tile holds (``TileSignature`` in the
-``FrameCache``): only tiles whose contents would change are cleared and drawn. The mask is
+the tiles' draws (a big closed solid wholly beyond a cascade's near plane without its faces
+turned away from the light: the depth each texel keeps is the same), and the records of what
+each tile holds (``TileSignature`` in the ``FrameCache``): only tiles whose contents would
+change are cleared and drawn. The mask is
 1 where an alpha-hashed caster lies in front of what a texel holds: its shadow is the share
 of texels the filter finds, which PCF Sharpen must leave alone (``lighting_frag.glsl``).
 """
@@ -15,14 +17,16 @@ import numpy as np
 from ..core import cascades
 from ..core.shadow_plan import layout_atlas
 from . import instancing, shaders
+from .draw_lists import closed_outward
 from .instancing import column_major_f32
 from .resources import AtlasTiles, PartialMarks
 
 
-# NOTE: a stabilized cascade's x/y (texel-snapped) do not move with a small camera move, but
-# its depth range follows the camera by a little: a tile is kept when the depth row of its
-# light matrix moved by at most this (clip units, ~1e-4 mm over a 100 m range), far below
-# any depth bias, and compared with the matrix it was drawn with, so it cannot drift.
+# NOTE: a cascade kept from the frame before (core/cascades/holding.py) has the very same
+# light matrix; one refitted to the same box may differ in the depth row by rounding: a
+# tile is kept when that row moved by at most this (clip units, ~1e-4 mm over a 100 m
+# range), far below any depth bias, and compared with the matrix it was drawn with, so it
+# cannot drift.
 TILE_DEPTH_TOLERANCE = 1e-6
 
 
@@ -209,6 +213,7 @@ def _draw_casters(targets, lists, instances, tile, visible, cull_front, partial_
                                          instances.world_from_objects[visible])
     default = 'FRONT' if cull_front else 'NONE'
     culling = default
+    solids = None if cull_front or partial_only else _solids_beyond_near(instances, tile, visible)
     # (program, which instances it draws, their MeshDraws list, whether it reads the
     # material): the partial-caster mask draws only the hashed materials of the masked.
     passes = (("shadow_partial", lists.partial_mask, "shadow_masked", False),) \
@@ -247,13 +252,16 @@ def _draw_casters(targets, lists, instances, tile, visible, cull_front, partial_
                 offset += len(run)
             else:
                 shadow.uniform_float("clip_from_object", clip_from_objects[row].tolist())
+            # A closed solid's faces turned away from the light lie behind its faces
+            # toward it: culled, the nearest depth a texel keeps is the same.
+            solid = solids is not None and not reads_material and bool(solids[run].all())
             for batch, material in getattr(items[index], draws):
                 if partial_only and material.shadow_mode != 'HASHED':
                     continue
                 # 4.2+ "Backface Culling" of shadows: the faces turned away from the
                 # light (the winding turned around for a mirrored instance).
                 wanted = ('FRONT' if mirrored[index] else 'BACK') \
-                    if material.backface_culling_shadow else default
+                    if material.backface_culling_shadow or solid else default
                 if wanted != culling:
                     gpu.state.face_culling_set(wanted)
                     culling = wanted
@@ -267,6 +275,31 @@ def _draw_casters(targets, lists, instances, tile, visible, cull_front, partial_
                     targets.call(batch.draw, shadow)
     if culling != default:
         gpu.state.face_culling_set(default)
+
+
+def _solids_beyond_near(instances, tile, visible):
+    """Per row of ``visible`` (instance indices): whether it is a closed solid wound
+    outward (``draw_lists.closed_outward``) whose world box lies wholly beyond ``tile``'s
+    near plane (a sun cascade's), so the light sees it only from outside and its faces
+    turned away from the light may be culled; None when there is none."""
+    if tile.cascade is None or instances.bounds_lo_hi is None or not len(visible):
+        return None
+    meshes = instances.meshes
+    solid = np.fromiter((closed_outward(meshes[i]) for i in visible.tolist()), dtype=bool,
+                        count=len(visible))
+    if not solid.any():
+        return None
+    rows = np.flatnonzero(solid)
+    lo, hi = (b[visible[rows]] for b in instances.bounds_lo_hi)
+    corners = np.where(_CORNER_PICK[None, :, :], hi[:, None, :], lo[:, None, :])
+    depth = corners @ tile.clip_from_world[2, :3] + tile.clip_from_world[2, 3]   # (n, 8)
+    solid[rows] = depth.min(axis=1) >= -1.0      # orthographic: clip z = window depth
+    return solid
+
+
+# Which end of a box each of its 8 corners takes per axis (bit a of the index).
+_CORNER_PICK = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)], dtype=bool)
+_CORNER_PICK.setflags(write=False)
 
 
 def _cull(snap_instances, instances, tile):

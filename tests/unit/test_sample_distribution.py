@@ -52,19 +52,6 @@ def test_receiver_rectangle_holds_every_receiver_of_the_slice():
                                     ROTATION) is None
 
 
-def test_receiver_rectangle_holds_still_while_the_receivers_fit():
-    blocks = _blocks(10.0, 40.0)
-    first = cascades.receiver_square(np.eye(4), PROJECTION, blocks, 15.0, 30.0, ROTATION)
-    moved = np.eye(4)
-    moved[:3, 3] = (0.01, 0.0, 0.0)
-    held = cascades.receiver_square(moved, PROJECTION, blocks, 15.0, 30.0, ROTATION, first)
-    assert held[0] is first[0] and held[1] is first[1]
-    far = np.eye(4)
-    far[:3, 3] = (50.0, 0.0, 0.0)
-    assert not np.array_equal(cascades.receiver_square(far, PROJECTION, blocks, 15.0, 30.0,
-                                                       ROTATION, first)[0], first[0])
-
-
 def test_fitted_cascades_use_smaller_texels_than_the_sphere():
     blocks = _blocks(20.0, 60.0)
     plain = cascades.compute_cascades(np.eye(4), PROJECTION, np.array([0.3, 0.2, -1.0]))

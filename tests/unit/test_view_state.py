@@ -129,3 +129,25 @@ def test_a_view_that_shows_another_scene_starts_afresh():
     plan = _frame(state, other, A_FRAME[1])
     assert plan.frozen_camera is other.camera
     assert _drawn(plan) == _drawn(_frame(ShadowViewState(), other, A_FRAME[1]))
+
+
+def _final(snap, frame):
+    return dataclasses.replace(snap, is_viewport=False, frame=frame)
+
+
+def test_a_final_render_keeps_the_boxes_of_a_render_of_the_same_frame_only():
+    """F12 again after a small camera move keeps the shadow boxes; a render of another
+    frame number is the same as in a process that rendered nothing before (a farm's
+    worker renders any frame to the pixels ``-a`` gives it)."""
+    (first, first_blocks), (moved, moved_blocks) = B_FRAMES
+    state = ShadowViewState()
+    before = _frame(state, _final(first, 1), first_blocks)
+    again = _frame(state, _final(moved, 1), moved_blocks)
+    fresh = _frame(ShadowViewState(), _final(moved, 1), moved_blocks)
+    kept = [a.clip_from_world.tobytes() == b.clip_from_world.tobytes()
+            for a, b in zip(before.tiles, again.tiles)]
+    assert sum(kept) >= 1, kept
+    assert _drawn(again) != _drawn(fresh), "the check can fail: it kept what a fresh fit moves"
+    _frame(state, _final(first, 1), first_blocks)
+    assert _drawn(_frame(state, _final(moved, 2), moved_blocks)) == \
+        _drawn(_frame(ShadowViewState(), _final(moved, 2), moved_blocks))

@@ -10,6 +10,7 @@ the CPU without Blender. One module per concept:
   (``compute_cascades``);
 - ``receivers``: sample-distribution shadow maps (the visible depth range and each
   cascade's visible receivers);
+- ``holding``: a cascade's box kept from one frame to the next while it still serves;
 - ``culling``: which casters may shadow a cascade or a point light's cube face;
 - ``light_frusta``: spot and point light shadow frusta.
 
@@ -42,7 +43,8 @@ from .fitting import (CascadeFit, CascadeSet, compute_cascades, default_occluder
 from .light_frusta import (POINT_LIGHT_FACES, point_light_face_angle,
                            point_light_face_matrices, spot_light_matrices, spot_texel_size)
 from .receivers import (ReceiverTermsCache, block_window, depth_blocks_from_reduction,
-                        receiver_square, receiver_terms, visible_depth_range)
+                        receiver_square, receiver_terms, rounded_square,
+                        visible_depth_range)
 from .spaces import (frustum_slice_corners, light_view_matrix, orthographic_clip_from_view,
                      perspective_clip_from_view, view_slice_corners)
 from .splits import (MIN_CASCADE_RESOLUTION, blend_band_widths, cascade_resolutions,
@@ -58,7 +60,7 @@ __all__ = [
     "POINT_LIGHT_FACES", "point_light_face_angle", "point_light_face_matrices",
     "spot_light_matrices", "spot_texel_size",
     "ReceiverTermsCache", "block_window", "depth_blocks_from_reduction", "receiver_square",
-    "receiver_terms", "visible_depth_range",
+    "receiver_terms", "rounded_square", "visible_depth_range",
     "frustum_slice_corners", "light_view_matrix", "orthographic_clip_from_view",
     "perspective_clip_from_view", "view_slice_corners",
     "MIN_CASCADE_RESOLUTION", "blend_band_widths", "cascade_resolutions",

@@ -19,7 +19,8 @@ import numpy as np
 from ..camera import as_projection
 from ..checks import finite, matrix4, vector3
 from ..memo import ValueMemo
-from .receivers import ReceiverTermsCache, receiver_square
+from .holding import CascadeNeed, hold_cascade, lead_box
+from .receivers import ReceiverTermsCache, receiver_square, rounded_square
 from .spaces import (_bounds, _box_corners, _check_rotation, _rigid_inverse,
                      _transform_points, light_view_matrix, orthographic_clip_from_view,
                      view_slice_corners)
@@ -50,6 +51,10 @@ class CascadeFit:
       ``compute_cascades``; NaN when fitted directly).
     - ``receiver_rectangle``: the (centre_xy, half widths) of the slice's visible
       receivers the box was narrowed to (``receivers.receiver_square``), or None.
+    - ``need_centre_xy``, ``need_half_xy``: the centre and half widths of what the box had
+      to hold when it was fitted (``holding.CascadeNeed``, rotated light frame; stabilized
+      only): a box fitted later is put ahead of where that moved (``holding.lead_box``),
+      with more room on an axis where it grew.
     """
 
     light_from_world: np.ndarray
@@ -68,6 +73,8 @@ class CascadeFit:
     split_far: float = math.nan
     texel_size_xy: np.ndarray = field(default_factory=lambda: np.full(2, math.nan))
     receiver_rectangle: tuple | None = None
+    need_centre_xy: np.ndarray | None = None
+    need_half_xy: np.ndarray | None = None
 
     @property
     def world_from_light(self):
@@ -202,24 +209,68 @@ class _LightBox(NamedTuple):
 
 
 def _fit_checked(corners, rotation, resolution, stabilize, margin, scene_near,
-                 bounding_sphere_world, receiver_box):
+                 bounding_sphere_world, receiver_box, held=None, receivers=None):
     """``fit_cascade`` on checked inputs: (8, 3) corners, a 3x3 rotation, an int
     resolution, a float margin, the scene's ``_scene_near_depth`` or None, a (centre,
     radius) sphere or None. ``compute_cascades`` checks its inputs once per frame and calls
-    this per cascade (the checks cost as much as the fit)."""
+    this per cascade (the checks cost as much as the fit).
+    ``held``: the ``CascadeFit`` this cascade had the frame before (stabilized only): kept
+    while it holds this frame's receivers (``holding.hold_cascade``); a refitted box is
+    put ahead of them in the direction they moved (``holding.lead_box``). ``receivers``:
+    the receivers' own rectangle (unrounded) that ``receiver_box`` was widened from; the
+    box must hold it (None: ``receiver_box`` itself)."""
     if not stabilize:
         box = _tight_box(corners, rotation, resolution, receiver_box)
+        return _cascade_from_box(box, rotation, resolution, stabilize, margin, scene_near)
+    if bounding_sphere_world is None:
+        centre_world, radius = bounding_sphere(corners)
     else:
-        if bounding_sphere_world is None:
-            centre_world, radius = bounding_sphere(corners)
-        else:
-            centre_world, radius = bounding_sphere_world
-        radius = round_up_radius(max(radius, 1e-9))
-        if receiver_box is None:
-            box = _sphere_box(centre_world, radius, rotation, resolution)
-        else:
-            box = _receiver_box(centre_world, radius, rotation, resolution, receiver_box)
-    return _cascade_from_box(box, rotation, resolution, stabilize, margin, scene_near)
+        centre_world, radius = bounding_sphere_world
+    radius = round_up_radius(max(radius, 1e-9))
+    if receiver_box is None:
+        box = _sphere_box(centre_world, radius, rotation, resolution)
+    else:
+        box = _receiver_box(centre_world, radius, rotation, resolution, receiver_box)
+    need = _need(corners, rotation, receiver_box if receivers is None else receivers, box,
+                 margin, scene_near)
+    compatible = held is not None and held.resolution == resolution and held.stabilized \
+        and held.light_from_world[:3, :3].tobytes() == rotation.tobytes()
+    centre_xy = lead_box(box.centre_xy, 0.5 * (box.high_xy - box.low_xy), box.texel_xy, need,
+                         held.need_centre_xy if compatible else None)
+    if centre_xy is not box.centre_xy:
+        shift = centre_xy - box.centre_xy
+        box = box._replace(centre_xy=centre_xy, low_xy=box.low_xy + shift,
+                           high_xy=box.high_xy + shift)
+    fresh = _cascade_from_box(box, rotation, resolution, stabilize, margin, scene_near)
+    fresh.need_centre_xy = 0.5 * (need.low_xy + need.high_xy)
+    fresh.need_half_xy = 0.5 * (need.high_xy - need.low_xy)
+    return hold_cascade(held, fresh, need) if compatible else fresh
+
+
+def _need(corners, rotation, receiver_box, box, margin, scene_near):
+    """The ``holding.CascadeNeed`` of a stabilized fit: the slice's corners' rectangle in
+    the rotated light frame, cut to the receivers' (``receiver_box``) when there is one;
+    the depths the sphere's box spans (its near side pulled back by the margin)."""
+    corners_xy = corners @ rotation[:2].T
+    low, high = corners_xy.min(axis=0), corners_xy.max(axis=0)
+    if receiver_box is not None:
+        centre = np.asarray(receiver_box[0], dtype=np.float64)
+        half = np.asarray(receiver_box[1], dtype=np.float64)
+        cut_low, cut_high = np.maximum(low, centre - half), np.minimum(high, centre + half)
+        if np.all(cut_high >= cut_low):
+            low, high = cut_low, cut_high
+    sphere_depth = -float(rotation[2] @ box.sphere_centre)
+    near_depth = sphere_depth - box.sphere_radius - margin
+    if scene_near is not None:
+        near_depth = min(near_depth, scene_near)
+    return CascadeNeed(low, high, near_depth, sphere_depth + box.sphere_radius,
+                       3.0 * _depth_step(box.sphere_radius))
+
+
+def _depth_step(radius):
+    """The grid a stabilized box's depths are widened to: 1/16 of the sphere's radius,
+    rounded up to a power of two."""
+    return _round_up_dyadic(radius / 16.0, bits=1)
 
 
 def _sphere_box(centre_world, radius, rotation, resolution, radius_xy=None):
@@ -243,9 +294,15 @@ def _sphere_box(centre_world, radius, rotation, resolution, radius_xy=None):
     # so every world point keeps rasterizing at the same spot inside its texel and
     # shadow edges do not crawl ("shimmer").
     centre_xy = snap_to_texel_grid(centre_rot[:2], texel)
+    # NOTE: the sphere follows the camera, so its far side moves with every step; widened
+    # to a coarse grid (1/16 of the radius) and one step more, the far plane stays put for
+    # a while, and a box kept from the frame before (``holding.hold_cascade``) keeps its
+    # depths while the sphere's far side is inside them. The near side is where the
+    # occluder margin is measured from: it stays exact.
+    step = _depth_step(radius)
     return _LightBox(centre_xy, centre_xy - half, centre_xy + half,
                      nearest_depth=-centre_rot[2] - radius,
-                     farthest_depth=-centre_rot[2] + radius,
+                     farthest_depth=math.ceil((-centre_rot[2] + radius) / step) * step + step,
                      texel_xy=texel, sphere_centre=centre_world, sphere_radius=radius)
 
 
@@ -263,12 +320,10 @@ def _receiver_box(centre_world, radius, rotation, resolution, receiver_box):
                                               (rotation @ centre_world)[2]])
         radius_xy = np.minimum(np.asarray(receiver_box[1], dtype=np.float64), radius)
     box = _sphere_box(centre_world, radius, rotation, resolution, radius_xy)
-    # NOTE: the sphere follows the camera, so its depth range moves with every step;
-    # widened to a coarse grid (1/16 of the radius), it stays put while the receivers'
-    # rectangle does, and so does the whole shadow map.
-    step = _round_up_dyadic(radius / 16.0, bits=1)
-    return box._replace(nearest_depth=math.floor(box.nearest_depth / step) * step,
-                        farthest_depth=math.ceil(box.farthest_depth / step) * step)
+    # NOTE: the sphere's near side moves with every camera step too; on a coarse grid
+    # (the far side's), it stays put while the receivers' rectangle does.
+    step = _depth_step(radius)
+    return box._replace(nearest_depth=math.floor(box.nearest_depth / step) * step)
 
 
 def _tight_box(corners, rotation, resolution, receiver_box):
@@ -330,6 +385,27 @@ def _cascade_from_box(box, rotation, resolution, stabilize, margin, scene_near):
         texel_size_xy=box.texel_xy)
 
 
+# NOTE: a stabilized cascade refitted to its visible receivers in a view that had a box
+# the frame before is this much wider than they are on each side (a share of their half
+# width): room to drift into while the camera moves, so the box (and its shadow map) is
+# kept for a while (``holding``). Texel density costs as much. A view's first fit (a
+# single render) has none: it is the sharpest.
+RECEIVER_ROOM = 1.0 / 32.0
+
+
+def _room(receivers, before):
+    """Per axis, the share of the receivers' half width a refitted box gets as room: none
+    for a view's first fit, ``RECEIVER_ROOM``, twice that on an axis where what the box
+    had to hold grew since the box before was fitted (a view turning toward a longer
+    stretch of ground keeps growing it)."""
+    if before is None:
+        return np.zeros(2)
+    if before.need_half_xy is None:
+        return np.full(2, RECEIVER_ROOM)
+    grew = np.asarray(receivers[1]) > before.need_half_xy
+    return np.where(grew, 2.0 * RECEIVER_ROOM, RECEIVER_ROOM)
+
+
 @dataclass
 class CascadeSet:
     """All cascades of one frame: ``cascades[i]`` covers view depths
@@ -350,7 +426,7 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
                      lam=0.5, manual=None, shadow_distance=None, base_resolution=2048,
                      equal_resolution=False, stabilize=True, occluder_margin=None,
                      scene_bounds=None, up_hint=None, blend_band=0.0, depth_range=None,
-                     depth_blocks=None, previous_squares=None, receiver_cache=None):
+                     depth_blocks=None, held=None, receiver_cache=None):
     """Splits and shadow boxes for one camera and one sun.
 
     - ``projection``: ``CameraProjection`` or an OpenGL ``clip_from_view`` matrix.
@@ -370,9 +446,12 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
       on empty depth. Clamped to the clip start .. shadow distance.
     - ``depth_blocks``: the visible receivers per screen block (see ``receiver_square``):
       each cascade then covers only the rectangle its receivers need (stabilized: rounded
-      and held; unstabilized: exactly), when that is
-      smaller than its slice's sphere; ``previous_squares`` (per cascade, the half widths
-      of the last frame) hold those squares still while they fit.
+      up, with ``RECEIVER_ROOM`` to spare after a ``held`` one; unstabilized: exactly),
+      when that is
+      smaller than its slice's sphere.
+    - ``held``: the last frame's ``CascadeFit`` per cascade (stabilized only): each is
+      kept while it still holds its slice's receivers and is not much coarser than a fresh
+      fit (``holding.hold_cascade``), so its shadow map need not be drawn again.
     - ``receiver_cache``: a ``receivers.ReceiverTermsCache`` the view keeps from frame to
       frame (None: one for this call).
 
@@ -442,15 +521,17 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
             # size) is bit-for-bit the same while the camera turns.
             centre_view, radius = view_sphere
             sphere = (_transform_points(world_from_view, centre_view[None])[0], radius)
-        square = None
+        before = held[index] if stabilize and held is not None and index < len(held) \
+            else None
+        square = receivers = None
         if depth_blocks is not None:
-            previous = previous_squares[index] if stabilize and previous_squares is not None \
-                and index < len(previous_squares) else None
-            square = receiver_square(world_from_view, projection, depth_blocks, slice_near,
-                                     splits[index + 1], rotation, previous,
-                                     exact=not stabilize, cache=receiver_cache)
+            receivers = receiver_square(world_from_view, projection, depth_blocks,
+                                        slice_near, splits[index + 1], rotation, exact=True,
+                                        cache=receiver_cache)
+            square = receivers if receivers is None or not stabilize else \
+                rounded_square(receivers, _room(receivers, before))
         fit = _fit_checked(_slice_corners(corners), rotation[:3, :3], resolution,
-                           stabilize, margin, scene_near, sphere, square)
+                           stabilize, margin, scene_near, sphere, square, before, receivers)
         fit.receiver_rectangle = square
         fit.split_near, fit.split_far = float(splits[index]), float(splits[index + 1])
         cascades.append(fit)

@@ -5,9 +5,9 @@ Owns the G-buffer's screen blocks as the planner reads them
 (``depth_blocks_from_reduction``), the visible depth range the splits divide
 (``visible_depth_range``), the rectangle each cascade's visible receivers need in the
 light's frame (``receiver_square``), and ``ReceiverTermsCache``, which keeps the per-block
-work of one view from frame to frame. The hysteresis that holds a range or a rectangle
-while it still fits is here too; what it holds from the frame before is passed in by the
-caller (``view_state.ShadowViewState`` keeps it per view). numpy only.
+work of one view from frame to frame. The hysteresis that holds a depth range while it
+still fits is here too; what it holds from the frame before is passed in by the caller
+(``view_state.ShadowViewState`` keeps it per view). numpy only.
 """
 
 import math
@@ -141,8 +141,7 @@ class ReceiverTermsCache:
 
 
 def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
-                    light_from_world_rot, previous=None, shrink_below=0.7, exact=False,
-                    cache=None):
+                    light_from_world_rot, exact=False, cache=None):
     """The rectangle (centre_xy, half_widths_xy) in the rotated light frame that holds every
     visible receiver between view depths ``near_depth`` and ``far_depth``, or None when no
     receiver is there.
@@ -150,12 +149,10 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
     ``blocks``: (ndc_low (N, 2), ndc_high (N, 2), nearest (N,), farthest (N,)): screen
     blocks and the view-depth range of what each shows (the G-buffer reduced on the GPU).
     Each block's part of the slice is a small frustum piece; its 8 corners bound it.
-    NOTE: each half width is rounded up to 1/32 of its leading power of two, and the
-    ``previous`` rectangle (centre, half widths) is kept while the receivers still fit in
-    it and it is less than 1/``shrink_below`` of what they need: small camera moves then
-    leave the cascade where it was, and the texel size changes rarely, by whole steps.
-    ``exact``: the receivers' own extent, neither rounded nor held (unstabilized
-    cascades).
+    NOTE: each half width is rounded up to 1/32 of its leading power of two
+    (``rounded_square``), so the texel size changes rarely, by whole steps; a box fitted
+    to it is kept while the receivers still fit (``holding``).
+    ``exact``: the receivers' own extent, not rounded.
     ``cache``: a ``ReceiverTermsCache`` to take the per-block terms from (None: computed
     here)."""
     _ndc_low, _ndc_high, nearest, farthest = blocks
@@ -191,20 +188,20 @@ def receiver_square(world_from_view, projection, blocks, near_depth, far_depth,
             greatest = (g_hi + np.maximum(*depth)).max()
         low.append(float(least) + float(offset[axis]))
         high.append(float(greatest) + float(offset[axis]))
-    centre = [0.5 * (lo + hi) for lo, hi in zip(low, high)]
-    if exact:
-        return np.array(centre), np.array([max(0.5 * (hi - lo), 1e-9)
-                                           for lo, hi in zip(low, high)])
-    half = [_round_up_dyadic(max(0.5 * (hi - lo), 1e-9), bits=6) for lo, hi in zip(low, high)]
-    if previous is not None:
-        old_centre, old_half = (np.asarray(v, dtype=np.float64) for v in previous)
-        # The whole previous rectangle, while it holds every receiver and is not much too
-        # big: the cascade then does not move at all (its shadow map can be kept).
-        if all(lo >= oc - oh and hi <= oc + oh and oh < h / shrink_below
-               for lo, hi, oc, oh, h in zip(low, high, old_centre.tolist(),
-                                            old_half.tolist(), half)):
-            return old_centre, old_half
-    return np.array(centre), np.array(half)
+    square = (np.array([0.5 * (lo + hi) for lo, hi in zip(low, high)]),
+              np.array([max(0.5 * (hi - lo), 1e-9) for lo, hi in zip(low, high)]))
+    return square if exact else rounded_square(square)
+
+
+def rounded_square(square, room=0.0):
+    """A receivers' rectangle (centre_xy, half widths) with each half width widened by
+    ``room`` (a share of it; one, or one per axis) and rounded up to 1/32 of its leading
+    power of two, so the texel size of a box fitted to it changes only in coarse steps."""
+    centre, half = square
+    rooms = np.broadcast_to(np.asarray(room, dtype=np.float64), (2,)).tolist()
+    return (np.asarray(centre, dtype=np.float64),
+            np.array([_round_up_dyadic(max(float(h) * (1.0 + r), 1e-9), bits=6)
+                      for h, r in zip(half, rooms)]))
 
 
 def visible_depth_range(nearest, farthest, previous=None, steps_per_octave=8,
@@ -216,17 +213,24 @@ def visible_depth_range(nearest, farthest, previous=None, steps_per_octave=8,
     the ``previous`` range is kept while it still holds the new one and the new one's
     logarithmic span is not below ``shrink_below`` of it: small camera moves then leave the
     cascades exactly where they were (stabilized edges stay still, no re-rendered tiles),
-    and a range that only grows or shrinks a little does not pop. Returns (near, far) or
-    None when nothing is visible."""
+    and a range that only grows or shrinks a little does not pop. When the visible range
+    leaves the ``previous`` one, the end it left by is set one step further out: a camera
+    that keeps moving the same way then keeps the new range for a while too. Returns
+    (near, far) or None when nothing is visible."""
     if not (np.isfinite(nearest) and np.isfinite(farthest)) or not 0.0 < nearest <= farthest:
         return None
     step = math.log(2.0) / steps_per_octave
-    low = math.exp(math.floor(math.log(nearest) / step) * step)
-    high = math.exp(math.ceil(math.log(farthest) / step + 1e-9) * step)
+    low_step = math.floor(math.log(nearest) / step)
+    high_step = math.ceil(math.log(farthest) / step + 1e-9)
+    low, high = math.exp(low_step * step), math.exp(high_step * step)
     if previous is not None:
         old_low, old_high = previous
         if old_low <= low and old_high >= high and \
                 math.log(high / low) >= shrink_below * math.log(old_high / old_low):
             return previous
+        if low < old_low <= high:
+            low = math.exp((low_step - 1) * step)
+        if low <= old_high < high:
+            high = math.exp((high_step + 1) * step)
     return (low, high)
 

@@ -12,6 +12,7 @@ import numpy as np
 
 from csm_engine.blender import engine
 from tests.bpy.bpy_helpers import cube_on_plane, render_result
+from tests.bpy.scenes import blender_render
 
 W, H = 96, 64
 
@@ -41,6 +42,26 @@ def _render(scene):
 
 def _changed(a, b):
     return float(np.abs(a - b).max())
+
+
+def test_blender_gets_each_renders_own_pixels(empty_scene, tmp_path):
+    """The engine reads back and hands Blender its passes through memory kept between
+    renders: Blender's result of each render (through a 32-bit EXR) is that render's own
+    image, the one a render that keeps its images reads back, as the camera moves away and
+    back, FXAA on."""
+    scene, _cube = _scene(empty_scene)
+    scene.render.resolution_percentage = 100
+    scene.csm.fxaa = True
+    start = scene.camera.location.x
+    images = []
+    for index, shift in enumerate((0.0, 0.7, 0.0)):
+        scene.camera.location.x = start + shift
+        kept = render_result(scene, W, H).images["combined"][::-1]
+        handed = blender_render(scene, "CSM", tmp_path / f"render_{index}.exr")
+        assert np.abs(handed - kept).max() < 1e-6, f"render {index}"
+        images.append(handed)
+    assert np.abs(images[1] - images[0]).max() > 0.1, "the camera's move shows"
+    assert np.array_equal(images[2], images[0])
 
 
 def test_unchanged_rerender_uploads_nothing_and_draws_no_shadow_tile(empty_scene):
