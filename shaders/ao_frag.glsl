@@ -27,7 +27,13 @@
  * Inputs: the G-buffer's view depth (0 = background) and world normal. */
 
 #define AO_PI 3.14159265358979
+#ifndef AO_TOL_PX
+#define AO_TOL_PX 2.0
+#define AO_TOL_D 0.02
+#endif
+#ifndef AO_STEPS
 #define AO_STEPS 8             /* per side of a slice */
+#endif
 #define AO_MAX_RADIUS 256.0    /* pixels: a nearby occluder farther on screen is missed */
 
 /* View-space position (camera looks along -Z) of full-resolution pixel p at view depth d. */
@@ -44,6 +50,28 @@ float ao_pixel_footprint(float d)
   return (frame.is_perspective != 0 ? d : 1.0) / frame.ao_pixels_per_unit;
 }
 
+/* A unit view-space normal in one float channel, for the blur (reading the G-buffer's
+ * full-resolution normal again was a large part of each blur pass): octahedral
+ * coordinates at 12 bits each, as an integer below 2^24, which a float holds exactly. */
+float ao_pack_normal(vec3 n)
+{
+  vec2 oct = n.xy / (abs(n.x) + abs(n.y) + abs(n.z));
+  oct = n.z >= 0.0 ? oct : (1.0 - abs(oct.yx)) * vec2(oct.x >= 0.0 ? 1.0 : -1.0,
+                                                       oct.y >= 0.0 ? 1.0 : -1.0);
+  vec2 u = round(clamp(oct * 0.5 + 0.5, 0.0, 1.0) * 4095.0);
+  return u.x * 4096.0 + u.y;
+}
+
+vec3 ao_unpack_normal(float code)
+{
+  float x = floor(code / 4096.0);
+  vec2 oct = vec2(x, code - x * 4096.0) / 4095.0 * 2.0 - 1.0;
+  vec3 n = vec3(oct, 1.0 - abs(oct.x) - abs(oct.y));
+  n.xy = n.z >= 0.0 ? n.xy : (1.0 - abs(n.yx)) * vec2(n.x >= 0.0 ? 1.0 : -1.0,
+                                                      n.y >= 0.0 ? 1.0 : -1.0);
+  return normalize(n);
+}
+
 /* The screen radius (full-resolution pixels) of the distance around a pixel at view depth
  * d, at most AO_MAX_RADIUS; below 1.5 (and on the background, d 0) there is nothing to
  * search: everything within the distance is inside the pixel. */
@@ -54,20 +82,37 @@ float ao_radius_px(float d)
 
 #ifndef AO_BLUR
 
-/* The slice direction of half-resolution pixel p: one of AO_ROTATIONS evenly spread over
- * half a turn, (index + 0.5) / AO_ROTATIONS * pi, in a pattern where every pixel and its
- * four edge neighbours (the blur's taps) hold all of them. */
-#define AO_ROTATIONS 5
+/* The slice direction and step offset of half-resolution pixel p, from a 4x4 interleave:
+ * index (a 4x4 ordered dither, so neighbours get far-apart directions) picks one of
+ * AO_ROTATIONS directions evenly spread over half a turn, (index + 0.5) / AO_ROTATIONS *
+ * pi, and a step offset (index * 7 mod 16 + 0.5) / 16, so directions next to each other
+ * start their steps far apart. Every 4x4 block of pixels holds each pair once: the blur's
+ * 4x4 box sees the same sixteen wherever it stands, and on a smooth surface the pattern
+ * leaves nothing behind. */
+#define AO_ROTATIONS 16
 const vec2 AO_DIRECTIONS[AO_ROTATIONS] = vec2[AO_ROTATIONS](
-    vec2(0.95105652, 0.30901699),
-    vec2(0.58778525, 0.80901699),
-    vec2(0.00000000, 1.00000000),
-    vec2(-0.58778525, 0.80901699),
-    vec2(-0.95105652, 0.30901699));
+    vec2(0.99518473, 0.09801714),
+    vec2(0.95694034, 0.29028468),
+    vec2(0.88192126, 0.47139674),
+    vec2(0.77301045, 0.63439328),
+    vec2(0.63439328, 0.77301045),
+    vec2(0.47139674, 0.88192126),
+    vec2(0.29028468, 0.95694034),
+    vec2(0.09801714, 0.99518473),
+    vec2(-0.09801714, 0.99518473),
+    vec2(-0.29028468, 0.95694034),
+    vec2(-0.47139674, 0.88192126),
+    vec2(-0.63439328, 0.77301045),
+    vec2(-0.77301045, 0.63439328),
+    vec2(-0.88192126, 0.47139674),
+    vec2(-0.95694034, 0.29028468),
+    vec2(-0.99518473, 0.09801714));
 
-vec2 ao_direction(ivec2 p)
+int ao_pattern_index(ivec2 p)
 {
-  return AO_DIRECTIONS[(p.x + 2 * p.y) % AO_ROTATIONS];
+  ivec2 q = p & 3;
+  return ((q.x ^ q.y) & 1) * 8 + (q.y & 1) * 4 + (((q.x ^ q.y) >> 1) & 1) * 2 +
+         ((q.y >> 1) & 1);
 }
 
 /* acos on [-1, 1] to ~7e-5 rad (Abramowitz & Stegun 4.4.45): a few multiplies and a
@@ -115,14 +160,13 @@ void main()
   float fade = 1.0 / (0.05 * frame.ao_distance);
   /* A sample clamped back onto the pixel itself is the pixel, whatever rounding says. */
   float self_height = 1e-3 * ao_pixel_footprint(depth);
-  /* Interleaved gradient noise (Jimenez 2014) for the step offsets, independent of the
-   * rotation pattern. */
-  float jitter = fract(52.9829189 * fract(dot(vec2(ao_pixel), vec2(0.06711056, 0.00583715))));
+  int pattern = ao_pattern_index(ao_pixel);
+  float jitter = (float((pattern * 7) & 15) + 0.5) / 16.0;
 
   /* The visible arc and the arc with nothing above the tangent plane (the slice's share
    * of the cosine-weighted hemisphere) go to the blur, which divides the sum of one by the
    * sum of the other over its neighbourhood: a pixel with nothing nearby is exactly 1. */
-  vec2 dir = ao_direction(ao_pixel);
+  vec2 dir = AO_DIRECTIONS[pattern];
   /* With square pixels, a screen direction is the same direction in view space, and the
    * plane through the eye, the pixel and that direction is the slice. */
   vec3 dir_v = vec3(dir, 0.0);
@@ -185,16 +229,28 @@ void main()
   float visibility = n_proj_len * 0.25 * (arc_plus + arc_minus);
   /* The same with both horizons on the tangent plane (h = angle_n +- pi/2). */
   float open_sky = n_proj_len * (cos_n + angle_n * sin_n);
-  out_ao_sums = searched ? vec4(visibility, open_sky, depth, 0.0) :
-                         vec4(1.0, 1.0, depth, 0.0);
+  out_ao_sums = vec4(searched ? vec2(visibility, open_sky) : vec2(1.0), depth,
+                     ao_pack_normal(n));
 }
 
 #else /* AO_BLUR */
 
-/* Drawn only where the search searched (depth-tested); elsewhere the target keeps its
- * cleared (1, 0): open, no surface. Writes the view depth the value stands for, so the
- * lighting pass can bring it to full resolution without bleeding across silhouettes
- * (out_ao_depth: AO, view depth). */
+/* The blur's tent, box 4 convolved with box AO_BLUR_TAPS - 3 (1 2 3 4 3 2 1 or
+ * 1 2 2 2 1): it holds every offset modulo 4 equally often, so the 4x4 pattern leaves
+ * nothing behind, nor does it where the AO changes linearly across the pattern. */
+#if AO_BLUR_TAPS == 7
+const float AO_TENT[7] = float[7](1.0, 2.0, 3.0, 4.0, 3.0, 2.0, 1.0);
+#else
+const float AO_TENT[5] = float[5](1.0, 2.0, 2.0, 2.0, 1.0);
+#endif
+
+/* One axis of the separable blur (AO_BLUR_AXIS 0: rows, then 1: columns), drawn only where
+ * the search searched (depth-tested). Elsewhere the targets keep their cleared values:
+ * (0, 0, 0) for the rows (nothing, no surface), (1, 0) for the result (open, no surface).
+ * Rows: the tent-weighted sums of the visible and open arcs along the row and the pixel's
+ * own depth. Columns: the same sums along the column of the rows' sums, their ratio the
+ * AO, written with the view depth it stands for, so the lighting pass can bring it to full
+ * resolution without bleeding across silhouettes (out_ao_depth: AO, view depth). */
 void main()
 {
   ivec2 size = ivec2(frame.viewport_size);
@@ -202,7 +258,7 @@ void main()
   ivec2 p = min(h0 * 2, size - 1);   /* the full-resolution pixel this one stands for */
   vec4 own = texelFetch(ao_half, h0, 0);
   float depth = own.b;
-  vec3 n = normalize(mat3(frame.view_from_world) * texelFetch(gbuffer_normal, p, 0).xyz);
+  vec3 n = ao_unpack_normal(own.a);
   /* A neighbour's distance from the tangent plane, dot(position - center, n), with the
    * position (q * ray_scale + ray_offset) * d, -d (xy not times d in an orthographic view):
    * linear in the neighbour's pixel q, so each tap costs a multiply-add or two. */
@@ -220,31 +276,35 @@ void main()
   float ortho_along = (1.0 - perspective) * along_p;
   float center_height = depth * persp_along + ortho_along;
   /* Off the tangent plane by more than this (scene units): another surface. */
-  float inv_tolerance = 1.0 / (2.0 * ao_pixel_footprint(depth) + 0.02 * frame.ao_distance);
+  float inv_tolerance = 1.0 / (AO_TOL_PX * ao_pixel_footprint(depth) + AO_TOL_D * frame.ao_distance);
+  ivec2 axis = ivec2(1 - AO_BLUR_AXIS, AO_BLUR_AXIS);
+  /* Each tap was searched at full-resolution pixel 2h (the last column or row of an odd
+   * size aside, a pixel off: well inside the tolerance), 2 axis further than the last. */
+  float along_step = 2.0 * dot(vec2(axis), slope);
   ivec2 last = textureSize(ao_half, 0) - 1;
-  /* The pixel itself (on its own plane) and its four edge neighbours. */
-  float visible = own.r;
-  float open = own.g;
-  for (int i = 0; i < 4; i++) {
-    ivec2 offset = i < 2 ? ivec2(i * 2 - 1, 0) : ivec2(0, i * 2 - 5);
-    ivec2 h = clamp(h0 + offset, ivec2(0), last);
-    vec4 sums = texelFetch(ao_half, h, 0);
+  float visible = 0.0;
+  float open = 0.0;
+  for (int i = 0; i < AO_BLUR_TAPS; i++) {
+    int k = i - AO_BLUR_TAPS / 2;
+    vec4 sums = texelFetch(ao_half, clamp(h0 + k * axis, ivec2(0), last), 0);
     float d = sums.b;
-    /* h was computed at full-resolution pixel 2h (the last column or row of an odd size
-     * aside, a pixel off: well inside the tolerance). */
-    float along = dot(vec2(h - h0) * 2.0, slope);
+    float along = float(k) * along_step;
     float height = d * (persp_along + perspective * along) + ortho_along +
                    (1.0 - perspective) * along;
-    /* Background neighbours (depth 0, also the pixels with nothing to search) count for
+    /* Background taps (depth 0, also the pixels with nothing searched) count for
      * nothing. */
-    float weight = d > 0.0 ? clamp(1.0 - abs(height - center_height) * inv_tolerance,
-                                   0.0, 1.0) : 0.0;
+    float weight = d > 0.0 ? AO_TENT[i] * clamp(1.0 - abs(height - center_height) *
+                                                inv_tolerance, 0.0, 1.0) : 0.0;
     visible += weight * sums.r;
     open += weight * sums.g;
   }
+#if AO_BLUR_AXIS == 0
+  out_ao_sums = vec4(visible, open, depth, own.a);
+#else
   /* No open arc at all (a slice with no part of the hemisphere's weight): open. */
   float ao = open > 1e-6 ? visible / open : 1.0;
   out_ao_depth = vec2(clamp(ao, 0.0, 1.0), depth);
+#endif
 }
 
 #endif

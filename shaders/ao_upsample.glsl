@@ -5,9 +5,7 @@
  * computed at full-resolution pixel 2h, and holding that pixel's view depth): bilinear
  * weights, times how well each one's depth fits this surface (its depth here plus the
  * screen-space slope; 0 where the slope is unknown), so AO neither bleeds across
- * silhouettes nor blurs a crease away. A value with nothing searched (the background, or
- * the whole distance inside a pixel) holds (1, depth 0) and fits no surface; with no
- * value fitting, the one at px / 2 is taken (1 there). */
+ * silhouettes nor blurs a crease away. */
 float ambient_occlusion_at(ivec2 px, float depth, vec2 depth_slope)
 {
   ivec2 last = textureSize(ambient_occlusion, 0) - 1;

@@ -37,6 +37,7 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
         return None
     half_size = ((width + 1) // 2, (height + 1) // 2)
     sums = targets.texture("ao_sums", half_size, 'RGBA32F')
+    rows = targets.texture("ao_rows", half_size, 'RGBA32F')
     blurred = targets.texture("ao", half_size, 'RG32F')
     searched = targets.texture("ao_searched", half_size, 'DEPTH_COMPONENT32F')
     library = shaders.LIBRARY
@@ -49,15 +50,21 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
         return AmbientOcclusion(blurred, blurred_fb, True)
     frame_cache.ambient_occlusion = None
     # NOTE: the search writes depth 1 where there is nothing to search (background, or
-    # the whole distance inside the pixel) and 0 elsewhere; the blur is depth-tested
-    # against it (its triangle lies at depth 1: GREATER), so llvmpipe skips the blocks
-    # without a search instead of running them masked. What it skips keeps the cleared
-    # "open, background" (AO 1, depth 0), which the lighting pass reads as open.
+    # the whole distance inside the pixel) and 0 elsewhere; both blur passes are
+    # depth-tested against it (their triangle lies at depth 1: GREATER), so llvmpipe skips
+    # the blocks without a search instead of running them masked. What they skip keeps
+    # the cleared values: "nothing" for the rows' sums (depth 0, which the column pass
+    # leaves out) and "open, background" (AO 1, depth 0) for the result, which the
+    # lighting pass reads as open.
     search_fb = targets.framebuffer("ao_search", depth=searched, colors=(sums,))
+    rows_fb = targets.framebuffer("ao_rows", depth=searched, colors=(rows,))
     blurred_fb = targets.framebuffer("ao", depth=searched, colors=(blurred,))
+    with rows_fb.bind():
+        targets.call(rows_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
     with blurred_fb.bind():
         targets.call(blurred_fb.clear, color=(1.0, 0.0, 0.0, 0.0))
-    for program, fb in (("ao", search_fb), ("ao_blur", blurred_fb)):
+    for program, fb, source in (("ao", search_fb, None), ("ao_blur_rows", rows_fb, sums),
+                                ("ao_blur", blurred_fb, rows)):
         shader = library.get(program)
         with fb.bind():
             gpu.state.viewport_set(0, 0, *half_size)
@@ -69,11 +76,11 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
                 gpu.state.depth_mask_set(False)
             shader.bind()
             shader.uniform_block("frame", frame_ubo)
-            if program == "ao":
+            if source is None:
                 shader.uniform_sampler("gbuffer_depth", gbuffer.view_depth)
+                shader.uniform_sampler("gbuffer_normal", gbuffer.normal)
             else:
-                shader.uniform_sampler("ao_half", sums)
-            shader.uniform_sampler("gbuffer_normal", gbuffer.normal)
+                shader.uniform_sampler("ao_half", source)
             targets.call(targets.fullscreen_batch().draw, shader)
     gpu.state.depth_test_set('NONE')
     gpu.state.depth_mask_set(False)
