@@ -80,7 +80,19 @@ float ao_radius_px(float d)
   return d > 0.0 ? min(frame.ao_distance / ao_pixel_footprint(d), AO_MAX_RADIUS) : 0.0;
 }
 
-#ifndef AO_BLUR
+#ifdef AO_MASK
+
+/* Depth 0 where there is something to search, 1 on the background and where everything
+ * within the distance is inside the pixel. The search and both blur passes are drawn
+ * depth-tested against it (GREATER, their triangle at depth 1): llvmpipe skips the pixel
+ * blocks that fail an early depth test, where an `if` in the shader would save nothing. */
+void main()
+{
+  ivec2 p = min(ivec2(gl_FragCoord.xy) * 2, ivec2(frame.viewport_size) - 1);
+  gl_FragDepth = ao_radius_px(texelFetch(gbuffer_depth, p, 0).r) >= 1.5 ? 0.0 : 1.0;
+}
+
+#elif !defined(AO_BLUR)
 
 /* The slice direction and step offset of half-resolution pixel p, from a 4x4 interleave:
  * index (a 4x4 ordered dither, so neighbours get far-apart directions) picks one of
@@ -140,14 +152,10 @@ void main()
   ivec2 p = min(ao_pixel * 2, size - 1);
   float depth = texelFetch(gbuffer_depth, p, 0).r;
   float radius_px = ao_radius_px(depth);
-  /* Nothing to search on the background, nor where everything within the distance is
-   * inside this pixel: there the step loop runs no pass, the value is "open", and the
-   * depth written here keeps the blur away (it is drawn depth-tested, GREATER, with its
-   * triangle at depth 1: llvmpipe skips the pixel blocks that fail an early depth test,
-   * where an `if` in the shader would save nothing). */
+  /* Drawn only where the mask found something to search; a pixel of a block drawn for
+   * its neighbours takes no step and is "open". */
   bool searched = radius_px >= 1.5;
   radius_px = searched ? radius_px : -1.0;
-  gl_FragDepth = searched ? 0.0 : 1.0;
   vec3 center = ao_view_position(p, depth);
   vec3 n = normalize(mat3(frame.view_from_world) * texelFetch(gbuffer_normal, p, 0).xyz);
   vec3 v = frame.is_perspective != 0 ? normalize(-center) : vec3(0.0, 0.0, 1.0);

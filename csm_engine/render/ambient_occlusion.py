@@ -56,19 +56,21 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
     # the cleared values: "nothing" for the rows' sums (depth 0, which the column pass
     # leaves out) and "open, background" (AO 1, depth 0) for the result, which the
     # lighting pass reads as open.
+    mask_fb = targets.framebuffer("ao_mask", depth=searched)
     search_fb = targets.framebuffer("ao_search", depth=searched, colors=(sums,))
     rows_fb = targets.framebuffer("ao_rows", depth=searched, colors=(rows,))
     blurred_fb = targets.framebuffer("ao", depth=searched, colors=(blurred,))
-    with rows_fb.bind():
-        targets.call(rows_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
-    with blurred_fb.bind():
-        targets.call(blurred_fb.clear, color=(1.0, 0.0, 0.0, 0.0))
-    for program, fb, source in (("ao", search_fb, None), ("ao_blur_rows", rows_fb, sums),
+    for fb, cleared in ((search_fb, (0.0, 0.0, 0.0, 0.0)), (rows_fb, (0.0, 0.0, 0.0, 0.0)),
+                        (blurred_fb, (1.0, 0.0, 0.0, 0.0))):
+        with fb.bind():
+            targets.call(fb.clear, color=cleared)
+    for program, fb, source in (("ao_mask", mask_fb, None), ("ao", search_fb, None),
+                                ("ao_blur_rows", rows_fb, sums),
                                 ("ao_blur", blurred_fb, rows)):
         shader = library.get(program)
         with fb.bind():
             gpu.state.viewport_set(0, 0, *half_size)
-            if program == "ao":
+            if program == "ao_mask":
                 gpu.state.depth_test_set('ALWAYS')
                 gpu.state.depth_mask_set(True)
             else:
@@ -78,7 +80,8 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
             shader.uniform_block("frame", frame_ubo)
             if source is None:
                 shader.uniform_sampler("gbuffer_depth", gbuffer.view_depth)
-                shader.uniform_sampler("gbuffer_normal", gbuffer.normal)
+                if program == "ao":
+                    shader.uniform_sampler("gbuffer_normal", gbuffer.normal)
             else:
                 shader.uniform_sampler("ao_half", source)
             targets.call(targets.fullscreen_batch().draw, shader)

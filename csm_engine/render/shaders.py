@@ -195,8 +195,10 @@ _AO_COMMON = dict(vertex="fullscreen_vert.glsl", fragment="ao_frag.glsl",
                   push=(), frame=True)
 PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
                                             ("FLOAT_2D", "gbuffer_normal")),
-                      outputs=(("VEC4", "out_ao_sums"),), depth_write="ANY",
+                      outputs=(("VEC4", "out_ao_sums"),),
                       defines=(("AO_STEPS", _os.environ.get("AO_STEPS", "8")),))
+PROGRAMS["ao_mask"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),),
+                           outputs=(), depth_write="ANY", defines=(("AO_MASK", "1"),))
 AO_BLUR_TAPS = _os.environ.get("AO_TAPS", "7")
 PROGRAMS["ao_blur_rows"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "ao_half"),),
                                 outputs=(("VEC4", "out_ao_sums"),),
