@@ -289,22 +289,29 @@ void main()
   /* Each tap was searched at full-resolution pixel 2h (the last column or row of an odd
    * size aside, a pixel off: well inside the tolerance), 2 axis further than the last. */
   float along_step = 2.0 * dot(vec2(axis), slope);
+  /* A tap's distance from the tangent plane over the tolerance is d * scale + offset,
+   * both linear in the tap's offset k: the weight costs a multiply-add per tap. */
+  float k0 = float(-(AO_BLUR_TAPS / 2));
+  float scale = (persp_along + perspective * k0 * along_step) * inv_tolerance;
+  float scale_step = perspective * along_step * inv_tolerance;
+  float offset = (ortho_along - center_height + (1.0 - perspective) * k0 * along_step) *
+                 inv_tolerance;
+  float offset_step = (1.0 - perspective) * along_step * inv_tolerance;
   ivec2 last = textureSize(ao_half, 0) - 1;
   float visible = 0.0;
   float open = 0.0;
   for (int i = 0; i < AO_BLUR_TAPS; i++) {
-    int k = i - AO_BLUR_TAPS / 2;
-    vec4 sums = texelFetch(ao_half, clamp(h0 + k * axis, ivec2(0), last), 0);
+    vec4 sums = texelFetch(ao_half, clamp(h0 + (i - AO_BLUR_TAPS / 2) * axis, ivec2(0), last),
+                           0);
     float d = sums.b;
-    float along = float(k) * along_step;
-    float height = d * (persp_along + perspective * along) + ortho_along +
-                   (1.0 - perspective) * along;
     /* Background taps (depth 0, also the pixels with nothing searched) count for
      * nothing. */
-    float weight = d > 0.0 ? AO_TENT[i] * clamp(1.0 - abs(height - center_height) *
-                                                inv_tolerance, 0.0, 1.0) : 0.0;
+    float weight = d > 0.0 ? AO_TENT[i] * clamp(1.0 - abs(d * scale + offset), 0.0, 1.0) :
+                             0.0;
     visible += weight * sums.r;
     open += weight * sums.g;
+    scale += scale_step;
+    offset += offset_step;
   }
 #if AO_BLUR_AXIS == 0
   out_ao_sums = vec4(visible, open, depth, own.a);
