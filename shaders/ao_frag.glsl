@@ -1,4 +1,7 @@
-/* Screen-space ambient occlusion: two programs from this one file, both at half resolution.
+/* Screen-space ambient occlusion: four programs from this one file, all at half resolution.
+ *
+ * "ao_mask" (AO_MASK defined): depth 0 where there is something to search, 1 elsewhere;
+ * the other three are drawn depth-tested against it.
  *
  * "ao": a GTAO-style horizon search (Jimenez et al. 2016, "Practical Real-Time Strategies
  * for Accurate Indirect Occlusion"). Each pixel walks the depth buffer both ways along one
@@ -6,34 +9,30 @@
  * frame.ao_distance, and integrates the cosine-weighted visible arc between the two
  * horizons in closed form. Averaged over directions this is the fraction of the
  * cosine-weighted hemisphere not occluded within the distance, the quantity Cycles' AO
- * pass estimates by ray casting (1 = open sky, 0 = fully occluded). The direction comes
- * from a 5-rotation pattern in which every pixel and its four edge neighbours hold all
- * five. It writes the slice's visible arc, its arc with nothing above the tangent plane,
- * and the view depth of the full-resolution pixel it stands for.
+ * pass estimates by ray casting (1 = open sky, 0 = fully occluded). Direction and step
+ * offset come from a 4x4 interleave (every 4x4 block holds all sixteen). It writes the
+ * slice's visible arc, its arc with nothing above the tangent plane, the view depth of
+ * the full-resolution pixel it stands for and that pixel's normal, packed.
  *
- * "ao_blur" (AO_BLUR defined): over the pixel and its four edge neighbours (all five
- * directions), the visible arcs summed over the open arcs summed, which removes the
- * pattern. A neighbour counts only when its surface point lies on the pixel's tangent
+ * "ao_blur_rows", "ao_blur" (AO_BLUR defined, AO_BLUR_AXIS 0, 1): a separable depth-aware
+ * blur, 7 taps along the rows, then 7 along the columns, weighted 1 2 3 4 3 2 1: the
+ * visible arcs summed over the open arcs summed, which removes the pattern without
+ * leaving blocks. A tap counts only when its surface point lies on the pixel's tangent
  * plane (within a few pixel footprints), so occlusion does not bleed across silhouettes
  * and a grazing plane still blurs along itself. Written as (AO, view depth); the lighting
  * pass brings it to full resolution (ambient_occlusion_at in ao_upsample.glsl).
  *
- * NOTE (llvmpipe): the cost is the search's depth reads, and every full-screen pass costs
- * a few milliseconds before it does anything; hence one slice per pixel and five blur
- * taps rather than two slices and a 4x4 blur (the same error against Cycles or less,
- * docs/ambient-occlusion.md), and the blur at half resolution. Pixels with nothing to
- * search are kept out of the blur by a depth test, not an `if` (see the search's main).
+ * NOTE (llvmpipe): the cost is the search's depth reads, then the blur's taps; hence one
+ * slice per pixel and 7 steps a side (two slices of 8 with a 4x4 blur cost twice as much
+ * for the same error against Cycles, docs/ambient-occlusion.md), a blur of 7 + 7 taps
+ * rather than 49, and everything at half resolution. Pixels with nothing to search are
+ * kept out of the search and the blur by a depth test, not an `if`: llvmpipe skips the
+ * pixel blocks that fail an early depth test, and runs both sides of an `if`.
  *
  * Inputs: the G-buffer's view depth (0 = background) and world normal. */
 
 #define AO_PI 3.14159265358979
-#ifndef AO_TOL_PX
-#define AO_TOL_PX 2.0
-#define AO_TOL_D 0.02
-#endif
-#ifndef AO_STEPS
-#define AO_STEPS 8             /* per side of a slice */
-#endif
+#define AO_STEPS 7             /* per side of a slice */
 #define AO_MAX_RADIUS 256.0    /* pixels: a nearby occluder farther on screen is missed */
 
 /* View-space position (camera looks along -Z) of full-resolution pixel p at view depth d. */
@@ -194,10 +193,12 @@ void main()
   /* Steps at least a pixel apart: a pixel whose distance spans a few pixels takes fewer
    * (llvmpipe leaves the loop once a whole block of pixels has). */
   for (int k = 0; k < AO_STEPS && float(k) <= radius_px; k++) {
-    /* Even spacing: the highest horizon within the distance is often near its end (a
-     * wall's points at exactly the distance), so the far steps matter as much as the
-     * near. */
-    float t = max((float(k) + jitter) / float(AO_STEPS) * radius_px, 1.5 + float(k));
+    /* Nearly even spacing, a little denser towards the end: the highest horizon within
+     * the distance is often near its end (a wall's points at exactly the distance), so
+     * the far steps matter as much as the near (s (1.3 - 0.3 s) with 7 steps: the error
+     * against Cycles of 8 evenly spaced ones, docs/ambient-occlusion.md). */
+    float s = (float(k) + jitter) / float(AO_STEPS);
+    float t = max(s * (1.3 - 0.3 * s) * radius_px, 1.5 + float(k));
     vec2 offset = round(dir * t);
     for (int side = 0; side < 2; side++) {
       /* Off the screen: the border pixel, a real surface point (none beyond it). */
@@ -243,14 +244,13 @@ void main()
 
 #else /* AO_BLUR */
 
-/* The blur's tent, box 4 convolved with box AO_BLUR_TAPS - 3 (1 2 3 4 3 2 1 or
- * 1 2 2 2 1): it holds every offset modulo 4 equally often, so the 4x4 pattern leaves
- * nothing behind, nor does it where the AO changes linearly across the pattern. */
-#if AO_BLUR_TAPS == 7
-const float AO_TENT[7] = float[7](1.0, 2.0, 3.0, 4.0, 3.0, 2.0, 1.0);
-#else
-const float AO_TENT[5] = float[5](1.0, 2.0, 2.0, 2.0, 1.0);
-#endif
+/* The blur's weights along each axis: a box of 4 convolved with itself. A box of 4 holds
+ * every offset modulo 4 once, so it removes the 4x4 pattern where the AO is even; where
+ * the AO changes across the pattern, a box leaves a sawtooth of period 4 (blocks, seen
+ * at contacts), which the second box removes. (1 2 2 2 1, a box of 4 with one of 2, left
+ * visible blotches on the voxel scenes.) */
+#define AO_BLUR_TAPS 7
+const float AO_TENT[AO_BLUR_TAPS] = float[AO_BLUR_TAPS](1.0, 2.0, 3.0, 4.0, 3.0, 2.0, 1.0);
 
 /* One axis of the separable blur (AO_BLUR_AXIS 0: rows, then 1: columns), drawn only where
  * the search searched (depth-tested). Elsewhere the targets keep their cleared values:
@@ -284,7 +284,7 @@ void main()
   float ortho_along = (1.0 - perspective) * along_p;
   float center_height = depth * persp_along + ortho_along;
   /* Off the tangent plane by more than this (scene units): another surface. */
-  float inv_tolerance = 1.0 / (AO_TOL_PX * ao_pixel_footprint(depth) + AO_TOL_D * frame.ao_distance);
+  float inv_tolerance = 1.0 / (2.0 * ao_pixel_footprint(depth) + 0.02 * frame.ao_distance);
   ivec2 axis = ivec2(1 - AO_BLUR_AXIS, AO_BLUR_AXIS);
   /* Each tap was searched at full-resolution pixel 2h (the last column or row of an odd
    * size aside, a pixel off: well inside the tolerance), 2 axis further than the last. */

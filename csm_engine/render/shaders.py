@@ -186,27 +186,23 @@ for _name in [name for name in PROGRAMS
         (("VEC4", "out_ids"),),
         defines=_spec.get("defines", ()) + (("CRYPTOMATTE", "1"),))
 
-# Screen-space ambient occlusion (ao_frag.glsl): the horizon search (visible and open arcs,
-# view depth) and a depth-aware blur (AO, view depth), both at half resolution; lighting
-# brings it to full resolution and multiplies its ambient term by the result.
-import os as _os
+# Screen-space ambient occlusion (ao_frag.glsl), all at half resolution: the mask (depth
+# only: where to search), the horizon search (visible and open arcs, view depth, packed
+# normal) and the separable depth-aware blur, rows (the same sums) then columns (AO, view
+# depth); lighting brings it to full resolution and multiplies its ambient term by it.
 _AO_COMMON = dict(vertex="fullscreen_vert.glsl", fragment="ao_frag.glsl",
                   inputs=(("pos", "VEC2"),), interface=(("screen_uv", "VEC2", "smooth"),),
                   push=(), frame=True)
-PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
-                                            ("FLOAT_2D", "gbuffer_normal")),
-                      outputs=(("VEC4", "out_ao_sums"),),
-                      defines=(("AO_STEPS", _os.environ.get("AO_STEPS", "8")),))
 PROGRAMS["ao_mask"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),),
                            outputs=(), depth_write="ANY", defines=(("AO_MASK", "1"),))
-AO_BLUR_TAPS = _os.environ.get("AO_TAPS", "7")
+PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
+                                            ("FLOAT_2D", "gbuffer_normal")),
+                      outputs=(("VEC4", "out_ao_sums"),))
 PROGRAMS["ao_blur_rows"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "ao_half"),),
                                 outputs=(("VEC4", "out_ao_sums"),),
-                                defines=(("AO_BLUR", "1"), ("AO_BLUR_AXIS", "0"),
-                                         ("AO_BLUR_TAPS", AO_BLUR_TAPS)))
+                                defines=(("AO_BLUR", "1"), ("AO_BLUR_AXIS", "0")))
 PROGRAMS["ao_blur"] = dict(PROGRAMS["ao_blur_rows"], outputs=(("VEC2", "out_ao_depth"),),
-                           defines=(("AO_BLUR", "1"), ("AO_BLUR_AXIS", "1"),
-                                    ("AO_BLUR_TAPS", AO_BLUR_TAPS)))
+                           defines=(("AO_BLUR", "1"), ("AO_BLUR_AXIS", "1")))
 PROGRAMS["lighting"]["samplers"] += (("FLOAT_2D", "ambient_occlusion"),
                                      ("FLOAT_2D", "shadow_nearest_blocks"),
                                      ("FLOAT_2D", "shadow_volume_count"),
