@@ -57,6 +57,11 @@ QUICK_RESOLUTION = "160x90"
 QUICK_SAMPLES = 64
 COST_RESOLUTION = (1280, 720)
 OFF_BY = 0.1                     # a pixel counts as "off" beyond this AO difference
+# Smoothness is measured on pairs of adjacent pixels where Cycles' AO changes by less than
+# this and is below OCCLUDED_BELOW at one of the two (open ground, 1 in both engines,
+# would only dilute it).
+SMOOTH_STEP = 0.02
+OCCLUDED_BELOW = 0.98
 HEAT_FULL_SCALE = 0.25           # the heat map saturates at this AO difference
 
 COLOR_BACKGROUND = np.array((0, 0, 0), np.float64)
@@ -77,14 +82,42 @@ def eroded(mask):
     return inner
 
 
+def neighbour_difference(csm_ao, cycles_ao, compared):
+    """How much CSM's AO changes from one pixel to the next where Cycles' changes little:
+    (CSM's, Cycles' own) mean absolute difference between horizontally and vertically
+    adjacent ``compared`` pixels, over the pairs where Cycles' AO differs by less than
+    SMOOTH_STEP and is below OCCLUDED_BELOW at one of the two. Noise or a pattern in
+    CSM's AO raises the first; Cycles' sampling noise sets the second. (nan, nan) without
+    such pairs."""
+    csm_steps, cycles_steps = [], []
+    for axis in (0, 1):
+        first = [slice(None), slice(None)]
+        second = [slice(None), slice(None)]
+        first[axis], second[axis] = slice(None, -1), slice(1, None)
+        first, second = tuple(first), tuple(second)
+        cycles_step = cycles_ao[second] - cycles_ao[first]
+        pairs = compared[first] & compared[second] & (np.abs(cycles_step) < SMOOTH_STEP) & \
+            (np.minimum(cycles_ao[first], cycles_ao[second]) < OCCLUDED_BELOW)
+        csm_steps.append(np.abs(csm_ao[second] - csm_ao[first])[pairs])
+        cycles_steps.append(np.abs(cycles_step[pairs]))
+    csm_steps, cycles_steps = np.concatenate(csm_steps), np.concatenate(cycles_steps)
+    if csm_steps.size == 0:
+        return float("nan"), float("nan")
+    return float(csm_steps.mean()), float(cycles_steps.mean())
+
+
 def compare(csm_ao, cycles_ao, covered):
-    """Error statistics of CSM's AO against Cycles' on the ``covered`` pixels."""
+    """Error statistics of CSM's AO against Cycles' on the ``covered`` pixels, and how
+    smooth each is (``neighbour_difference``)."""
     compared = eroded(covered)
     error = (csm_ao - cycles_ao)[compared]
     count = int(compared.sum())
     if count == 0:
         raise CLIError("no pixel to compare: the camera sees no geometry", EXIT_RENDER)
+    csm_step, cycles_step = neighbour_difference(csm_ao, cycles_ao, compared)
     return dict(compared_pixels=count,
+                neighbour_difference_csm=csm_step,
+                neighbour_difference_cycles=cycles_step,
                 mean_abs_error=float(np.abs(error).mean()),
                 bias=float(error.mean()),
                 off_percent=float(100.0 * (np.abs(error) > OFF_BY).mean()),
@@ -341,15 +374,23 @@ def markdown(results, cost, resolution, samples, command):
         f"per pixel, {resolution[0]}x{resolution[1]}.",
         "",
         "| scene | distance | compared pixels | mean abs. error | bias (CSM - Cycles) | "
-        f"pixels off by > {OFF_BY:g} | mean AO Cycles / CSM | Cycles time |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        f"pixels off by > {OFF_BY:g} | mean AO Cycles / CSM | neighbour difference "
+        "CSM / Cycles | Cycles time |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for r in results:
         lines.append(
             f"| {r['scene']} | {r['distance']:g} | {r['compared_pixels']:,} | "
             f"{r['mean_abs_error']:.3f} | {r['bias']:+.3f} | {r['off_percent']:.1f} % | "
-            f"{r['cycles_mean']:.3f} / {r['csm_mean']:.3f} | {r['cycles_seconds']:.0f} s |")
-    lines += ["", "Left to right: Cycles' AO pass, CSM's AO, the error (grey: agree; red: "
+            f"{r['cycles_mean']:.3f} / {r['csm_mean']:.3f} | "
+            f"{r['neighbour_difference_csm']:.4f} / {r['neighbour_difference_cycles']:.4f} | "
+            f"{r['cycles_seconds']:.0f} s |")
+    lines += ["", "Neighbour difference: the mean absolute AO difference between adjacent "
+              "pixels where Cycles' AO changes by less than "
+              f"{SMOOTH_STEP:g} and is below {OCCLUDED_BELOW:g} (CSM's, then Cycles' own, "
+              "its sampling noise): a CSM value well above Cycles' is noise or a pattern "
+              "a viewer sees.", "",
+              "Left to right: Cycles' AO pass, CSM's AO, the error (grey: agree; red: "
               "CSM darker, blue: CSM lighter, full colour at a difference of "
               f"{HEAT_FULL_SCALE:g}; black: not compared).", ""]
     for r in results:
@@ -409,7 +450,9 @@ def run(argv, prog=PROG):
         results.append(values)
         print(f"ao-report: {name} (distance {distance:g}): mean abs. error "
               f"{values['mean_abs_error']:.3f}, bias {values['bias']:+.3f}, "
-              f"{values['off_percent']:.1f} % off by > {OFF_BY:g} "
+              f"{values['off_percent']:.1f} % off by > {OFF_BY:g}, neighbour difference "
+              f"{values['neighbour_difference_csm']:.4f} (Cycles "
+              f"{values['neighbour_difference_cycles']:.4f}) "
               f"({values['compared_pixels']} pixels, Cycles {values['cycles_seconds']:.0f} s)")
     cost = None if args.quick else measure_cost()
     if cost:

@@ -40,6 +40,37 @@ def test_json_holds_the_scene_and_a_small_error(quick_run):
     assert abs(result["bias"]) <= result["mean_abs_error"]
 
 
+# CSM's AO changes from pixel to pixel at most this many times as much as Cycles' where
+# Cycles' is smooth (quick run: measured 1.4; a one-slice search with a five-tap blur,
+# visibly blotchy, 2.6; two slices with a 4x4 box, 1.6).
+SMOOTHNESS_BOUND = 2.0
+
+
+def test_csm_ao_is_as_smooth_as_cycles_where_cycles_is(quick_run):
+    _, report = quick_run
+    [result] = report["results"]
+    csm, cycles = result["neighbour_difference_csm"], result["neighbour_difference_cycles"]
+    print(f"neighbour difference: CSM {csm:.4f}, Cycles {cycles:.4f}")
+    assert 0.0 < cycles and csm < SMOOTHNESS_BOUND * cycles
+
+
+def test_neighbour_difference_sees_a_pattern_and_not_a_ramp_or_open_ground():
+    rows, cols = np.mgrid[0:20, 0:30]
+    cycles = 0.5 + 0.002 * cols                       # a gentle ramp, occluded
+    compared = np.ones(cycles.shape, bool)
+    csm, ref = ao_report.neighbour_difference(cycles.copy(), cycles, compared)
+    assert csm == pytest.approx(ref) and ref == pytest.approx(0.001, abs=1e-4)
+    checker = cycles + 0.02 * ((rows + cols) % 2)     # the same with a 2x2 pattern
+    csm, ref = ao_report.neighbour_difference(checker, cycles, compared)
+    assert csm == pytest.approx(0.02, abs=1e-3) and csm > 10 * ref
+    # Open in Cycles (1 at both pixels) and steps Cycles shows too are left out.
+    cycles_open = np.where(cols < 15, 1.0, cycles)
+    cycles_open[:, 22:] -= 0.3
+    csm_open = np.where(cols < 15, 1.0 - 0.1 * ((rows + cols) % 2), cycles_open)
+    csm, ref = ao_report.neighbour_difference(csm_open, cycles_open, compared)
+    assert csm == pytest.approx(ref)
+
+
 def test_markdown_section_is_rewritten_and_prose_kept(quick_run):
     out, report = quick_run
     text = (out / "ambient-occlusion.md").read_text(encoding="utf-8")
