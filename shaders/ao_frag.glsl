@@ -298,6 +298,10 @@ void main()
                  inv_tolerance;
   float offset_step = (1.0 - perspective) * along_step * inv_tolerance;
   ivec2 last = textureSize(ao_half, 0) - 1;
+  /* Where the distance spans only a few pixels, so does the occlusion (a contact line at
+   * a small distance): taps beyond about the distance's screen radius fade out, so the
+   * blur does not wash it out. */
+  float steps_per_radius = 2.0 / max(ao_radius_px(depth), 1e-3);
   float visible = 0.0;
   float open = 0.0;
   for (int i = 0; i < AO_BLUR_TAPS; i++) {
@@ -306,8 +310,9 @@ void main()
     float d = sums.b;
     /* Background taps (depth 0, also the pixels with nothing searched) count for
      * nothing. */
-    float weight = d > 0.0 ? AO_TENT[i] * clamp(1.0 - abs(d * scale + offset), 0.0, 1.0) :
-                             0.0;
+    float near = clamp(1.5 - float(abs(i - AO_BLUR_TAPS / 2)) * steps_per_radius, 0.0, 1.0);
+    float weight = d > 0.0 ? near * AO_TENT[i] * clamp(1.0 - abs(d * scale + offset),
+                                                       0.0, 1.0) : 0.0;
     visible += weight * sums.r;
     open += weight * sums.g;
     scale += scale_step;
