@@ -1,11 +1,13 @@
 """The ambient-occlusion pass: a half-resolution horizon search over the G-buffer and a
-depth-aware blur (``ao_frag.glsl``), which the lighting pass brings to full resolution.
+separable depth-aware blur (``ao_frag.glsl``), which the lighting pass brings to full
+resolution.
 
-Owns the half-resolution AO targets (the search's arcs and depth, the blurred AO and depth,
-and a depth target saying which pixels were searched, which the blur is tested against)
-and the record of what the blurred one holds (the frame cache's ``ambient_occlusion``):
-with the G-buffer kept from the frame before and the same AO inputs, the AO drawn then is
-kept too. Off (or at strength or distance 0), nothing is allocated or drawn.
+Owns the half-resolution AO targets (a depth target saying which pixels have something to
+search, which the search and the blur are tested against; the search's arcs, depth and
+normal; the blur's row sums; the blurred AO and depth) and the record of what the blurred
+one holds (the frame cache's ``ambient_occlusion``): with the G-buffer kept from the frame
+before and the same AO inputs, the AO drawn then is kept too. Off (or at strength or
+distance 0), nothing is allocated or drawn.
 """
 
 from typing import NamedTuple
@@ -49,13 +51,13 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
         blurred_fb = targets.framebuffer("ao", depth=searched, colors=(blurred,))
         return AmbientOcclusion(blurred, blurred_fb, True)
     frame_cache.ambient_occlusion = None
-    # NOTE: the search writes depth 1 where there is nothing to search (background, or
-    # the whole distance inside the pixel) and 0 elsewhere; both blur passes are
-    # depth-tested against it (their triangle lies at depth 1: GREATER), so llvmpipe skips
-    # the blocks without a search instead of running them masked. What they skip keeps
-    # the cleared values: "nothing" for the rows' sums (depth 0, which the column pass
-    # leaves out) and "open, background" (AO 1, depth 0) for the result, which the
-    # lighting pass reads as open.
+    # NOTE: the mask writes depth 1 where there is nothing to search (background, or the
+    # whole distance inside the pixel) and 0 elsewhere; the search and both blur passes
+    # are depth-tested against it (their triangle lies at depth 1: GREATER), so llvmpipe
+    # skips the blocks without a search instead of running them masked. What they skip
+    # keeps the cleared values: "nothing" for the search's and the rows' sums (depth 0,
+    # which the blur leaves out) and "open, background" (AO 1, depth 0) for the result,
+    # which the lighting pass reads as open.
     mask_fb = targets.framebuffer("ao_mask", depth=searched)
     search_fb = targets.framebuffer("ao_search", depth=searched, colors=(sums,))
     rows_fb = targets.framebuffer("ao_rows", depth=searched, colors=(rows,))
