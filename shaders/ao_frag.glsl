@@ -23,8 +23,8 @@
  * pass brings it to full resolution (ambient_occlusion_at in ao_upsample.glsl).
  *
  * NOTE (llvmpipe): the cost is the search's depth reads, then the blur's taps; hence one
- * slice per pixel and 7 steps a side (two slices of 8 with a 4x4 blur cost twice as much
- * for the same error against Cycles, docs/ambient-occlusion.md), a blur of 7 + 7 taps
+ * slice per pixel and 7 steps a side (two slices of 8 with a 4x4 blur cost 1.7 times as
+ * much for the same error against Cycles, docs/ambient-occlusion.md), a blur of 7 + 7 taps
  * rather than 49, and everything at half resolution. Pixels with nothing to search are
  * kept out of the search and the blur by a depth test, not an `if`: llvmpipe skips the
  * pixel blocks that fail an early depth test, and runs both sides of an `if`.
