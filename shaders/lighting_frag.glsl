@@ -102,19 +102,27 @@ void add_sun(inout Surface s, inout vec3 color, out float visibility, out float 
   }
 #endif
 
-  /* NOTE: llvmpipe runs both sides of an `if` (and one pass of any loop) for every pixel,
-   * but leaves a loop once no pixel of its group needs another pass: in this loop a pixel
-   * pays for the next cascade's lookup only where some pixel near it is in a blend band. */
+  /* NOTE: llvmpipe runs both sides of an `if` for every pixel, but leaves a loop once no
+   * pixel of its group needs another pass: in this loop a pixel pays for the next
+   * cascade's lookup only where some pixel near it is in a blend band. The loop's test
+   * is at the end of its body: a loop whose test comes first runs its body once more,
+   * with every pixel masked off, before it leaves (here a second lookup everywhere, a
+   * sixth of the pass). */
   float shadow_n_dot_sun = dot(s.shadow_normal, sun_l);
   vec3 p_sun = terminator_lookup_point(s, sun_n_dot_l, shadow_n_dot_sun);
-  for (int k = 0; k < sun_lookups; k++) {
-    ShadowTileData tile = frame.shadow_tiles[k == 0 ? sun_tile : second_tile];
+  for (int k = 0; ; k++) {
+    ShadowTileData tile = frame.shadow_tiles[max(k == 0 ? sun_tile : second_tile, 0)];
     /* Sun cascades are orthographic: said here as a constant, the compiler drops the
      * perspective code from the lookup (llvmpipe would run it for every pixel). */
     tile.is_perspective = 0;
     float vis = shadow_tile_visibility(tile, p_sun, s.shadow_normal, shadow_n_dot_sun,
                                        frame.sun_tan_half_angle);
-    sun_vis = k == 0 ? vis : mix(sun_vis, vis, next_weight);
+    if (k < sun_lookups) {
+      sun_vis = k == 0 ? vis : mix(sun_vis, vis, next_weight);
+    }
+    if (k + 1 >= sun_lookups) {
+      break;
+    }
   }
   if (sun_lookups > 0) {
     cascade += sun_lookups == 2 ? next_weight * float(second_tile - sun_tile) : 0.0;
