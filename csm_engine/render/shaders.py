@@ -230,6 +230,13 @@ for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
     PROGRAMS[_name + "_emission"] = dict(PROGRAMS[_name], on_demand=True, defines=_defines)
     PROGRAMS[_name + "_coat"] = dict(PROGRAMS[_name], on_demand=True,
                                      defines=_defines + (("SURFACE_COAT", "1"),))
+# Frames with alpha-hashed shadow casters read the atlas's partial-caster mask with the
+# "_hashed" twins (PARTIAL_CASTERS, shadow_atlas.glsl); elsewhere the mask is clear and
+# PCF's lookup skips the fetch. Compiled when first drawn.
+for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
+    PROGRAMS[_name + "_hashed"] = dict(
+        PROGRAMS[_name], on_demand=True,
+        defines=PROGRAMS[_name].get("defines", ()) + (("PARTIAL_CASTERS", "1"),))
 for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
     PROGRAMS[_name + "_debug"] = dict(
         PROGRAMS[_name],
