@@ -230,6 +230,14 @@ for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
     PROGRAMS[_name + "_emission"] = dict(PROGRAMS[_name], on_demand=True, defines=_defines)
     PROGRAMS[_name + "_coat"] = dict(PROGRAMS[_name], on_demand=True,
                                      defines=_defines + (("SURFACE_COAT", "1"),))
+# Frames whose World is an environment (spherical harmonics beyond band 0) draw with the
+# "_environment" twins (WORLD_ENVIRONMENT, world_light.glsl); a one-colour World's light
+# is the same whatever the direction, and the plain programs take it as such. Compiled
+# when first drawn.
+for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
+    PROGRAMS[_name + "_environment"] = dict(
+        PROGRAMS[_name], on_demand=True,
+        defines=PROGRAMS[_name].get("defines", ()) + (("WORLD_ENVIRONMENT", "1"),))
 # Frames with alpha-hashed shadow casters read the atlas's partial-caster mask with the
 # "_hashed" twins (PARTIAL_CASTERS, shadow_atlas.glsl); elsewhere the mask is clear and
 # PCF's lookup skips the fetch. Compiled when first drawn.
