@@ -43,10 +43,12 @@ float pcf_shadow(vec2 origin, float last_texel, vec2 texel, float compare, vec2 
   int blocks = (last + 1) / 2;
   int fetches = last >= 0 ? blocks * blocks : taps;
   float r = float(radius);
+  /* The grid's block (bx, by) of fetch k, row by row. NOTE: counted along, not k's
+   * quotient and remainder: llvmpipe divides integers one pixel at a time. */
+  int bx = 0;
+  int by = 0;
   for (int k = 0; ; k++) {
-    /* The grid's block k, row by row, and its texels' bilinear tap weights. */
-    int bx = k % max(blocks, 1);
-    int by = k / max(blocks, 1);
+    /* The block's texels' bilinear tap weights. */
     float wy0 = by == 0 ? 1.0 - f.y : 1.0;
     float wy1 = 2 * by + 1 == last ? f.y : 1.0;
     float wx0 = bx == 0 ? 1.0 - f.x : 1.0;
@@ -70,6 +72,11 @@ float pcf_shadow(vec2 origin, float last_texel, vec2 texel, float compare, vec2 
     lit += k < fetches ? dot(step(planes, stored), weights) : 0.0;
     if (k + 1 >= fetches) {
       break;
+    }
+    bx++;
+    if (bx >= blocks) {
+      bx = 0;
+      by++;
     }
   }
 #else
