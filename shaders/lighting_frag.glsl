@@ -139,23 +139,23 @@ void add_sun(inout Surface s, inout vec3 color, out float visibility, out float 
  * ones (`shadowed`: the first frame.point_shadow_count lights, at most MAX_POINT_SHADOWS)
  * look up their cube map's face; only the programs built with POINT_SHADOWS have that
  * lookup. `shadowed` is a constant at each call, so the compiler keeps one loop per call
- * and no lookup in the unshadowed one. */
+ * and no lookup in the unshadowed one. The loop tests at the end of its body (see
+ * add_sun): light i contributes only up to the last light, `last`, and a range without
+ * lights costs one masked pass, as a loop that tests first does. */
 void add_point_light_range(Surface s, int first, int end, const bool shadowed,
                            inout vec3 color)
 {
-  int limit = shadowed ? MAX_POINT_SHADOWS : MAX_POINT_LIGHTS;
-  for (int i = first; i < limit; i++) {
-    if (i >= end) {
-      break;
-    }
-    PointLightData light = frame.point_lights[i];
+  int last = min(end, shadowed ? MAX_POINT_SHADOWS : MAX_POINT_LIGHTS) - 1;
+  for (int i = first; ; i++) {
+    PointLightData light = frame.point_lights[min(i, MAX_POINT_LIGHTS - 1)];
     vec3 l;
     float attenuation = point_light_at(light, s.position, l);
-    if (attenuation > 0.0) {
+    if (attenuation > 0.0 && i <= last) {
       float vis = 1.0;
 #ifdef POINT_SHADOWS
       if (shadowed) {
-        int tile = frame.point_shadow_tiles + 6 * i + cube_face(s.position - light.position);
+        int tile = min(frame.point_shadow_tiles + 6 * i +
+                       cube_face(s.position - light.position), MAX_SHADOW_TILES - 1);
         vis = shadow_tile_visibility(frame.shadow_tiles[tile], s.position, s.shadow_normal,
                                      dot(s.shadow_normal, l), light.source_radius);
 #if SHADOW_FILTER == FILTER_EXACT
@@ -169,6 +169,9 @@ void add_point_light_range(Surface s, int first, int end, const bool shadowed,
 #endif
       color += light.color * attenuation * vis * surface_response(s, l);
       add_to_light_passes(s, l, light.color * attenuation * vis);
+    }
+    if (i >= last) {
+      break;
     }
   }
 }
@@ -187,16 +190,14 @@ void add_point_lights(Surface s, inout vec3 color)
 /* Adds every spot light to `color`, each through its own shadow map where it has one. */
 void add_spot_lights(Surface s, inout vec3 color)
 {
-  int spot_count = frame.spot_light_count;
+  /* The loop tests at the end of its body (see add_point_light_range). */
+  int last = min(frame.spot_light_count, MAX_SPOT_LIGHTS) - 1;
   int shadowed_rank = 0;   /* shadowed spots before this one */
-  for (int i = 0; i < MAX_SPOT_LIGHTS; i++) {
-    if (i >= spot_count) {
-      break;
-    }
-    SpotLightData spot = frame.spot_lights[i];
+  for (int i = 0; ; i++) {
+    SpotLightData spot = frame.spot_lights[min(i, MAX_SPOT_LIGHTS - 1)];
     vec3 l;
     float attenuation = spot_light_at(spot, s.position, l);
-    if (attenuation > 0.0) {
+    if (attenuation > 0.0 && i <= last) {
       float vis = 1.0;
       if (spot.shadow_tile >= 0) {
         vis = shadow_tile_visibility(frame.shadow_tiles[spot.shadow_tile], s.position,
@@ -213,6 +214,9 @@ void add_spot_lights(Surface s, inout vec3 color)
       add_to_light_passes(s, l, spot.color * attenuation * vis);
     }
     shadowed_rank += spot.shadow_tile >= 0 ? 1 : 0;
+    if (i >= last) {
+      break;
+    }
   }
 }
 
