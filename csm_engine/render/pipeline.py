@@ -235,7 +235,8 @@ class Pipeline:
 
         draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlusion,
                       target_fb, width, height, depth_tested, overlays, lighting_passes,
-                      volume_count)
+                      volume_count, lists.writes_emission, lists.writes_coat,
+                      bool(lists.partial_mask.any()))
         if target_fb is not None:
             t = self._sync(target_fb, "lighting", t)
         self.shadow_error = None
