@@ -33,24 +33,51 @@ struct Principled {
 
 /* A table of n x n nodes (x along a row, y across rows; core/bsdf_tables.py's layout) at
  * (x, y) in 0..1, nodes at i / (n - 1), interpolated linearly as Cycles'
- * lookup_table_read: four texels, every channel at once. */
-vec4 lut_table(int first_row, int first_column, int n, float x, float y)
+ * lookup_table_read. lut_cell finds the cell: the texture position of its corner
+ * between its four texels (for textureGather, which returns them x: left-top,
+ * y: right-top, z: right-bottom, w: left-bottom) and the fractions t across it;
+ * lut_mix interpolates one channel's four texels.
+ * NOTE: a gather reads one channel of four texels for the cost of one fetch, and the
+ * compiler drops the gathers of channels a program never uses (the metal's s_schlick5
+ * without metal): two to three fetches a table instead of four. At the table's last
+ * node the cell's far texels belong to the next table or lie past the texture's edge;
+ * their weight is 0 there, as Cycles' clamped second node's is. */
+vec2 lut_cell(int first_row, int first_column, int n, float x, float y, out vec2 t)
 {
   vec2 position = clamp(vec2(x, y), 0.0, 1.0) * float(n - 1);
   ivec2 i = min(ivec2(position), ivec2(n - 1));
-  ivec2 j = min(i + 1, ivec2(n - 1));
-  vec2 t = position - vec2(i);
-  vec4 bottom = mix(texelFetch(bsdf_lut, ivec2(first_column + i.x, first_row + i.y), 0),
-                    texelFetch(bsdf_lut, ivec2(first_column + j.x, first_row + i.y), 0), t.x);
-  vec4 top = mix(texelFetch(bsdf_lut, ivec2(first_column + i.x, first_row + j.y), 0),
-                 texelFetch(bsdf_lut, ivec2(first_column + j.x, first_row + j.y), 0), t.x);
-  return mix(bottom, top, t.y);
+  t = position - vec2(i);
+  return (vec2(float(first_column + i.x), float(first_row + i.y)) + 1.0) /
+         vec2(textureSize(bsdf_lut, 0));
 }
+
+float lut_mix(vec4 texels, vec2 t)
+{
+  return mix(mix(texels.w, texels.z, t.x), mix(texels.x, texels.y, t.x), t.y);
+}
+
+#if !(defined(GPU_ARB_texture_gather) || __VERSION__ >= 400)
+/* Without textureGather: the four texels fetched one by one, in its order. */
+vec4 lut_texels(vec2 corner, const int channel)
+{
+  ivec2 i = ivec2(corner * vec2(textureSize(bsdf_lut, 0))) - 1;
+  return vec4(texelFetch(bsdf_lut, i + ivec2(0, 1), 0)[channel],
+              texelFetch(bsdf_lut, i + ivec2(1, 1), 0)[channel],
+              texelFetch(bsdf_lut, i + ivec2(1, 0), 0)[channel],
+              texelFetch(bsdf_lut, i, 0)[channel]);
+}
+#  define LUT_TEXELS(corner, channel) lut_texels(corner, channel)
+#else
+#  define LUT_TEXELS(corner, channel) textureGather(bsdf_lut, corner, channel)
+#endif
 
 /* E (GGX albedo), s_schlick5 and E_avg (x, y, z) for roughness r and view cosine mu. */
 vec3 ggx_albedo_tables(float r, float mu)
 {
-  return lut_table(BSDF_LUT_E_ROW, 0, BSDF_LUT_E_SIZE, r, mu).xyz;
+  vec2 t;
+  vec2 corner = lut_cell(BSDF_LUT_E_ROW, 0, BSDF_LUT_E_SIZE, r, mu, t);
+  return vec3(lut_mix(LUT_TEXELS(corner, 0), t), lut_mix(LUT_TEXELS(corner, 1), t),
+              lut_mix(LUT_TEXELS(corner, 2), t));
 }
 
 float f0_from_ior(float eta)
@@ -110,8 +137,10 @@ float dielectric_albedo_share(float r, float mu, float eta)
   float slice = clamp(z, 0.0, 1.0) * float(BSDF_LUT_S_SIZE - 1);
   int k = min(int(slice), BSDF_LUT_S_SIZE - 1);
   /* Slice k's texels hold slices k and k + 1. */
-  vec2 slices = lut_table(BSDF_LUT_S_IOR_ROW, k * BSDF_LUT_S_SIZE, BSDF_LUT_S_SIZE, r, mu).xy;
-  return mix(slices.x, slices.y, slice - float(k));
+  vec2 t;
+  vec2 corner = lut_cell(BSDF_LUT_S_IOR_ROW, k * BSDF_LUT_S_SIZE, BSDF_LUT_S_SIZE, r, mu, t);
+  return mix(lut_mix(LUT_TEXELS(corner, 0), t), lut_mix(LUT_TEXELS(corner, 1), t),
+             slice - float(k));
 }
 
 /* A dielectric lobe's multiple-scattering Fresnel for roughness r (Cycles:

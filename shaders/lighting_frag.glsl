@@ -102,19 +102,27 @@ void add_sun(inout Surface s, inout vec3 color, out float visibility, out float 
   }
 #endif
 
-  /* NOTE: llvmpipe runs both sides of an `if` (and one pass of any loop) for every pixel,
-   * but leaves a loop once no pixel of its group needs another pass: in this loop a pixel
-   * pays for the next cascade's lookup only where some pixel near it is in a blend band. */
+  /* NOTE: llvmpipe runs both sides of an `if` for every pixel, but leaves a loop once no
+   * pixel of its group needs another pass: in this loop a pixel pays for the next
+   * cascade's lookup only where some pixel near it is in a blend band. The loop's test
+   * is at the end of its body: a loop whose test comes first runs its body once more,
+   * with every pixel masked off, before it leaves (here a second lookup everywhere, a
+   * sixth of the pass). */
   float shadow_n_dot_sun = dot(s.shadow_normal, sun_l);
   vec3 p_sun = terminator_lookup_point(s, sun_n_dot_l, shadow_n_dot_sun);
-  for (int k = 0; k < sun_lookups; k++) {
-    ShadowTileData tile = frame.shadow_tiles[k == 0 ? sun_tile : second_tile];
+  for (int k = 0; ; k++) {
+    ShadowTileData tile = frame.shadow_tiles[max(k == 0 ? sun_tile : second_tile, 0)];
     /* Sun cascades are orthographic: said here as a constant, the compiler drops the
      * perspective code from the lookup (llvmpipe would run it for every pixel). */
     tile.is_perspective = 0;
     float vis = shadow_tile_visibility(tile, p_sun, s.shadow_normal, shadow_n_dot_sun,
                                        frame.sun_tan_half_angle);
-    sun_vis = k == 0 ? vis : mix(sun_vis, vis, next_weight);
+    if (k < sun_lookups) {
+      sun_vis = k == 0 ? vis : mix(sun_vis, vis, next_weight);
+    }
+    if (k + 1 >= sun_lookups) {
+      break;
+    }
   }
   if (sun_lookups > 0) {
     cascade += sun_lookups == 2 ? next_weight * float(second_tile - sun_tile) : 0.0;
@@ -131,23 +139,23 @@ void add_sun(inout Surface s, inout vec3 color, out float visibility, out float 
  * ones (`shadowed`: the first frame.point_shadow_count lights, at most MAX_POINT_SHADOWS)
  * look up their cube map's face; only the programs built with POINT_SHADOWS have that
  * lookup. `shadowed` is a constant at each call, so the compiler keeps one loop per call
- * and no lookup in the unshadowed one. */
+ * and no lookup in the unshadowed one. The loop tests at the end of its body (see
+ * add_sun): light i contributes only up to the last light, `last`, and a range without
+ * lights costs one masked pass, as a loop that tests first does. */
 void add_point_light_range(Surface s, int first, int end, const bool shadowed,
                            inout vec3 color)
 {
-  int limit = shadowed ? MAX_POINT_SHADOWS : MAX_POINT_LIGHTS;
-  for (int i = first; i < limit; i++) {
-    if (i >= end) {
-      break;
-    }
-    PointLightData light = frame.point_lights[i];
+  int last = min(end, shadowed ? MAX_POINT_SHADOWS : MAX_POINT_LIGHTS) - 1;
+  for (int i = first; ; i++) {
+    PointLightData light = frame.point_lights[min(i, MAX_POINT_LIGHTS - 1)];
     vec3 l;
     float attenuation = point_light_at(light, s.position, l);
-    if (attenuation > 0.0) {
+    if (attenuation > 0.0 && i <= last) {
       float vis = 1.0;
 #ifdef POINT_SHADOWS
       if (shadowed) {
-        int tile = frame.point_shadow_tiles + 6 * i + cube_face(s.position - light.position);
+        int tile = min(frame.point_shadow_tiles + 6 * i +
+                       cube_face(s.position - light.position), MAX_SHADOW_TILES - 1);
         vis = shadow_tile_visibility(frame.shadow_tiles[tile], s.position, s.shadow_normal,
                                      dot(s.shadow_normal, l), light.source_radius);
 #if SHADOW_FILTER == FILTER_EXACT
@@ -161,6 +169,9 @@ void add_point_light_range(Surface s, int first, int end, const bool shadowed,
 #endif
       color += light.color * attenuation * vis * surface_response(s, l);
       add_to_light_passes(s, l, light.color * attenuation * vis);
+    }
+    if (i >= last) {
+      break;
     }
   }
 }
@@ -179,16 +190,14 @@ void add_point_lights(Surface s, inout vec3 color)
 /* Adds every spot light to `color`, each through its own shadow map where it has one. */
 void add_spot_lights(Surface s, inout vec3 color)
 {
-  int spot_count = frame.spot_light_count;
+  /* The loop tests at the end of its body (see add_point_light_range). */
+  int last = min(frame.spot_light_count, MAX_SPOT_LIGHTS) - 1;
   int shadowed_rank = 0;   /* shadowed spots before this one */
-  for (int i = 0; i < MAX_SPOT_LIGHTS; i++) {
-    if (i >= spot_count) {
-      break;
-    }
-    SpotLightData spot = frame.spot_lights[i];
+  for (int i = 0; ; i++) {
+    SpotLightData spot = frame.spot_lights[min(i, MAX_SPOT_LIGHTS - 1)];
     vec3 l;
     float attenuation = spot_light_at(spot, s.position, l);
-    if (attenuation > 0.0) {
+    if (attenuation > 0.0 && i <= last) {
       float vis = 1.0;
       if (spot.shadow_tile >= 0) {
         vis = shadow_tile_visibility(frame.shadow_tiles[spot.shadow_tile], s.position,
@@ -205,6 +214,9 @@ void add_spot_lights(Surface s, inout vec3 color)
       add_to_light_passes(s, l, spot.color * attenuation * vis);
     }
     shadowed_rank += spot.shadow_tile >= 0 ? 1 : 0;
+    if (i >= last) {
+      break;
+    }
   }
 }
 

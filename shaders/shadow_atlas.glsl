@@ -57,10 +57,16 @@ float shadow_tap(vec2 origin, float last_texel, vec2 tap, vec2 receiver, float c
   return texelFetch(shadow_atlas, ivec2(texel) + ivec2(origin), 0).r < compare ? 0.0 : 1.0;
 }
 
-/* The atlas's partial-caster mask (1: under an alpha-hashed caster) at a texel. */
+/* The atlas's partial-caster mask (1: under an alpha-hashed caster) at a texel. Only
+ * programs built with PARTIAL_CASTERS read it: without an alpha-hashed caster in the frame
+ * the mask is clear (render/shadow_atlas.py). */
 float partial_caster_at(vec2 origin, float last_texel, vec2 tap)
 {
+#ifdef PARTIAL_CASTERS
   return texelFetch(shadow_partial, ivec2(tile_texel(last_texel, tap)) + ivec2(origin), 0).r;
+#else
+  return 0.0;
+#endif
 }
 
 /* Receiver-plane slope bound, in texels of depth per texel across (a plane the light

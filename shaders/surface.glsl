@@ -1,7 +1,10 @@
 /* The surface at one pixel as the lighting pass reads it back from the G-buffer (targets
  * written by gbuffer_frag.glsl): world position rebuilt from the view depth, shading and
  * shadow normals, material, and the view depth's slope across the screen; and its response
- * to a light (the Principled BSDF of brdf.glsl, set up once per pixel). */
+ * to a light (the Principled BSDF of brdf.glsl, set up once per pixel). The emission and
+ * metallic target is read only by programs built with SURFACE_EMISSION, the coat target
+ * only by those with SURFACE_COAT (render/lighting.py picks them for frames whose
+ * materials write them). */
 #include "brdf.glsl"
 
 /* One pixel's surface. Positions and distances in scene units, normals unit length. */
@@ -44,7 +47,13 @@ Surface gbuffer_surface(ivec2 px, vec2 uv, float depth)
 {
   vec4 albedo_spec = texelFetch(gbuffer_albedo, px, 0);
   vec4 normal_shine = texelFetch(gbuffer_normal, px, 0);
+#ifdef SURFACE_EMISSION
   vec4 emission_metallic = texelFetch(gbuffer_emission, px, 0);
+#else
+  /* No material of this frame emits or is metal: the target holds zeros
+   * (render/gbuffer.py), and as constants they take the metal lobe out of the program. */
+  vec4 emission_metallic = vec4(0.0);
+#endif
   Surface s;
   s.view_depth = depth;
   s.position = world_position_at(uv, depth);
@@ -69,7 +78,13 @@ Surface gbuffer_surface(ivec2 px, vec2 uv, float depth)
   s.roughness = normal_shine.w;
   s.metallic = emission_metallic.a;
   s.emission = emission_metallic.rgb;
+#ifdef SURFACE_COAT
   s.coat = texelFetch(gbuffer_coat, px, 0).xyz;
+#else
+  /* No coated material: no coat layer to set up (its table lookups are half of
+   * principled_setup's). */
+  s.coat = vec3(0.0);
+#endif
   s.to_camera = frame.is_perspective != 0 ? normalize(frame.camera_position - s.position) :
                                             -frame.camera_forward;
   s.bsdf = principled_setup(s.albedo, s.metallic, s.specular, s.roughness, s.coat, s.normal,

@@ -1,7 +1,28 @@
 /* The World's light on a surface from its spherical harmonics (frame.world_sh, up to band
  * 2, core/world_light.py): the irradiance per normal for the diffuse lobe, and the radiance
  * around the reflected direction, blurred by roughness, for the specular lobes. A uniform
- * World gives its radiance L in both, whatever the direction. */
+ * World gives its radiance L in both, whatever the direction: programs built without
+ * WORLD_ENVIRONMENT (render/lighting.py: frames whose World is one colour) return it
+ * without evaluating the harmonics, whose higher bands are zero then. */
+
+#ifndef WORLD_ENVIRONMENT
+/* The uniform World's radiance: band 0 of world_sh_sum, the sum's only term that is not
+ * zero for it. */
+vec3 world_uniform_radiance()
+{
+  return max(0.282095 * frame.world_sh[0].rgb, vec3(0.0));
+}
+
+vec3 world_diffuse_radiance(vec3 n)
+{
+  return world_uniform_radiance();
+}
+
+vec3 world_specular_radiance(vec3 r, float roughness)
+{
+  return world_uniform_radiance();
+}
+#else
 
 /* sum of band-weighted coefficients times the harmonics at unit direction d */
 vec3 world_sh_sum(vec3 d, vec3 band_weights)
@@ -34,3 +55,4 @@ vec3 world_specular_radiance(vec3 r, float roughness)
   float exponent = max(2.0 / alpha2 - 2.0, 1e-3);
   return world_sh_sum(r, vec3(1.0, exp(-0.5 / exponent), exp(-2.0 / exponent)));
 }
+#endif

@@ -68,6 +68,7 @@ class WorkerSession:
         from ..core.captured_output import CapturedOutput
         self.job = job
         start = time.perf_counter()
+        cli.keep_freed_memory()
         # The engine must be registered before the file is read, or Blender reports the
         # file's CSM engine as missing.
         cli.ensure_registered()

@@ -13,22 +13,30 @@ LIGHTING_PROGRAMS = {"HARD": "lighting_hard", "PCF": "lighting", "SOFT": "lighti
                      "EXACT": "lighting_exact"}
 
 
-def lighting_program(snap):
+def lighting_program(snap, emission=False, coat=False, hashed=False):
     """The lighting program for this frame: its Shadow Filter's, with the point- and
-    spot-light loops only when the scene has such lights and the debug views only when one
-    is shown (shaders.py: llvmpipe pays for code a frame does not use)."""
+    spot-light loops only when the scene has such lights, the G-buffer's emission and
+    metallic target read only when some material of the frame writes it (``emission``),
+    its coat target only when some material has a coat (``coat``), the World's spherical
+    harmonics evaluated only for an environment World, PCF's partial-caster mask read only
+    when some shadow caster is alpha-hashed (``hashed``), and the debug views only when
+    one is shown (shaders.py: llvmpipe pays for code a frame does not use)."""
     settings = snap.settings
     debug = settings.debug_view != "NONE" or bool(settings.debug_inset)
     point_shadows = bool(snap.points) and snap.points[0].casts_shadow
     return (LIGHTING_PROGRAMS.get(settings.shadow_filter, "lighting") +
             ("_points" if snap.points else "") +
             ("_point_shadows" if point_shadows else "") + ("_spots" if snap.spots else "") +
+            ("_coat" if coat else "_emission" if emission else "") +
+            ("_environment" if snap.world_sh is not None else "") +
+            ("_hashed" if hashed and settings.shadow_filter == "PCF" else "") +
             ("_debug" if debug else ""))
 
 
 def draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlusion,
                   target_fb, width, height, depth_tested=False, overlays=True,
-                  passes=False, volume_count=None):
+                  passes=False, volume_count=None, emission=False, coat=False,
+                  hashed=False):
     """Shade ``gbuffer`` (``gbuffer.GBuffer``) with the shadow ``atlas``
     (``shadow_atlas.ShadowAtlas``) and ``ambient_occlusion`` (its ``AmbientOcclusion`` or
     None) into ``target_fb`` (None: the bound framebuffer). ``depth_tested``: the target
@@ -36,10 +44,13 @@ def draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlus
     cascades. ``passes``: draw with the PASSES programs, which also write the light and
     colour passes into ``target_fb``'s colour slots 2.. (``passes.LIGHTING_PASS_TARGETS``).
     ``volume_count``: the shadow-volume pass's count (``shadow_volumes``), for Filter Exact
-    and the Shadow error view."""
+    and the Shadow error view. ``emission``, ``coat``: the G-buffer's emission and
+    metallic target, its coat target, hold what some material wrote (else zeros, which the
+    program then does not read: ``lighting_program``). ``hashed``: some shadow caster is
+    alpha-hashed (else the atlas's partial-caster mask is clear)."""
     import gpu
     library = shaders.LIBRARY
-    program = lighting_program(snap)
+    program = lighting_program(snap, emission, coat, hashed)
     debug = program.endswith("_debug")
     suffix = "_passes" if passes else ""
     lighting = library.get(program + suffix)

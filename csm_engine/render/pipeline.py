@@ -119,11 +119,16 @@ class Pipeline:
     def _warn(self, messages):
         self.warnings.extend(w for w in messages if w not in self.warnings)
 
-    def _sync(self, fb, name, start):
-        """When profiling, wait for the GPU (a 1-pixel read) and record the pass time."""
+    def _sync(self, fb, name, start, depth_only=False):
+        """When profiling, wait for the GPU (a 1-pixel read) and record the pass time.
+        ``depth_only``: ``fb`` has no colour target, so its depth is read (a colour read
+        of it waits for nothing, and the pass's drawing would be counted in the next)."""
         if self.profile:
             with fb.bind():
-                fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
+                if depth_only:
+                    fb.read_depth(0, 0, 1, 1)
+                else:
+                    fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
             self.timings[name] = time.perf_counter() - start
         return time.perf_counter()
 
@@ -182,7 +187,8 @@ class Pipeline:
             if snap.settings.shadow_filter == "SOFT":
                 atlas = atlas._replace(
                     nearest_blocks=nearest_blocks(targets, atlas, tiles.drawn))
-            return tiles, atlas, self._sync(atlas.framebuffer, "shadow", t)
+            return tiles, atlas, self._sync(atlas.framebuffer, "shadow", t,
+                                               depth_only=True)
 
         ids = render_passes.cryptomatte_draw_ids(snap) \
             if passes is not None and passes.cryptomatte else None
@@ -229,7 +235,8 @@ class Pipeline:
 
         draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlusion,
                       target_fb, width, height, depth_tested, overlays, lighting_passes,
-                      volume_count)
+                      volume_count, lists.writes_emission, lists.writes_coat,
+                      bool(lists.partial_mask.any()))
         if target_fb is not None:
             t = self._sync(target_fb, "lighting", t)
         self.shadow_error = None

@@ -36,7 +36,8 @@ import statistics
 import time
 
 from csm_engine.blender.cli import (CLIError, EXIT_RENDER, EXIT_USAGE, apply_override,
-                                    open_scene, parse_resolution, run_reporting_errors)
+                                    keep_freed_memory, open_scene, parse_resolution,
+                                    run_reporting_errors)
 
 from . import bench_models, report_io
 from .bench_scenes import (SUZANNE_TRIANGLES, animate_one_object, build_field_scene,
@@ -742,6 +743,8 @@ def _gpu_name():
 
 
 def main(argv=None, prog=PROG):
+    # As ``python -m csm_engine`` does: freed frames' memory is kept (cli.keep_freed_memory).
+    keep_freed_memory()
     return run_reporting_errors(run, argv, prog, "bench")
 
 
