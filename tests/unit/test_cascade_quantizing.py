@@ -48,7 +48,7 @@ def test_a_flight_keeps_most_boxes_and_each_holds_its_receivers(depth_blocks):
              for a, b in zip(before.cascades, after.cascades)]
     kept = sum(_same(a, b) for a, b in pairs)
     # Before quantization every fresh fit moved with the camera: (almost) none was kept.
-    assert kept >= 0.8 * len(pairs), f"{kept} of {len(pairs)} boxes kept"
+    assert kept >= 0.7 * len(pairs), f"{kept} of {len(pairs)} boxes kept"
     plain = [_fit(_flight_camera(frame), depth_blocks, quantize=False) for frame in range(40)]
     assert sum(_same(a, b) for before, after in zip(plain, plain[1:])
                for a, b in zip(before.cascades, after.cascades)) < 0.5 * len(pairs)
@@ -99,9 +99,11 @@ def test_density_cost_is_bounded():
             receivers = cascades.receiver_square(camera, PROJECTION, BLOCKS, fit.split_near,
                                                  fit.split_far, rotation, exact=True)
             over_exact.append(np.max(fit.box_max[:2] / receivers[1]))
-    # Ladder (at most 4.4 %), grid room (3.2 %), the texel of slack and the 9-bit texel.
-    assert max(over_exact) <= 2.0 ** (1 / 16) * 1.04 * 1.003
-    assert np.mean(over_plain) <= 1.06 and max(over_plain) <= 1.10
+    # The ladder's step, the grid's room, the texel of slack and the 9-bit texel.
+    ladder = 2.0 ** (1 / quantizing.HALF_WIDTH_STEPS_PER_OCTAVE)
+    room = 1.0 + 1.0 / quantizing.CENTRE_STEPS_PER_BOX
+    assert max(over_exact) <= ladder * room * 1.01
+    assert np.mean(over_plain) <= 1.045 and max(over_plain) <= 1.07
 
 
 def test_boxes_sit_on_whole_texels_of_a_grid_fixed_in_light_space():

@@ -17,15 +17,17 @@ import numpy as np
 
 from .stabilization import _round_up_dyadic
 
-# NOTE: a half width rounded up on this ladder is at most 2 ** (1/16) - 1 = 4.4 % (on
-# average 2.2 %) wider than the receivers need; finer steps change the box (and redraw
-# its shadow map) more often while a turning camera's receivers grow or shrink.
-HALF_WIDTH_STEPS_PER_OCTAVE = 16
+# NOTE: a half width rounded up on this ladder is at most 2 ** (1/24) - 1 = 2.9 % (on
+# average 1.5 %) wider than the receivers need; finer steps change the box (and redraw
+# its shadow map) more often while a turning camera's receivers grow or shrink, coarser
+# ones blur every render's shadows (2 ** (1/16) steps with a 1/32 grid: 5 % coarser
+# texels, a few more wrong pixels at shadow edges against Cycles).
+HALF_WIDTH_STEPS_PER_OCTAVE = 24
 # NOTE: the box is wider than its rounded half width by half a grid step on each side, so
-# the snapped centre (at most half a step off) still holds the receivers: 1/32 of its
-# width (3 %) more. The box then stays while its receivers drift by up to one step: a
-# camera flying on redraws a cascade's map once per 1/32 of its width travelled.
-CENTRE_STEPS_PER_BOX = 32
+# the snapped centre (at most half a step off) still holds the receivers: 1/48 of its
+# width (2 %) more. The box then stays while its receivers drift by up to one step: a
+# camera flying on redraws a cascade's map once per 1/48 of its width travelled.
+CENTRE_STEPS_PER_BOX = 48
 # The depth grid: this share of the depth the box must span (the slice's sphere and the
 # occluder margin), rounded up to a power of two. Depth costs no texels, only precision.
 DEPTH_STEPS_PER_SPAN = 16
