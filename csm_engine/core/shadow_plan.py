@@ -102,7 +102,7 @@ _CORNER_PICK = np.array([[(i >> a) & 1 for a in range(3)] for i in range(8)], dt
 _CORNER_PICK.setflags(write=False)
 
 
-def plan_shadows(snap, bounds, depth_blocks=None, view_state=None, casters=None):
+def plan_shadows(snap, bounds, depth_blocks=None, view_state=None):
     """Cascade splits and light matrices for this frame (the math is in ``cascades``).
     ``depth_blocks``: what the G-buffer shows per screen block
     (``depth_blocks_from_reduction``), measured when the Fit to Visible Depth setting is
@@ -110,13 +110,14 @@ def plan_shadows(snap, bounds, depth_blocks=None, view_state=None, casters=None)
     and each cascade covers only its receivers. None: the cascades divide clip start ..
     shadow distance and cover their whole frustum slice.
     ``view_state``: the view's ``ShadowViewState``, read and updated (frozen cascades,
-    the last fit's depth range and cascade boxes). None: a fresh one, so nothing is
-    frozen or held. ``casters``: what the scene's objects are (compared with ``==``, e.g.
-    their mesh keys and matrices); a final render keeps the render before's boxes only
-    for the same frame number and ``casters`` (``ShadowViewState.follow_frame``)."""
+    and for a viewport the last fit's depth range and cascade boxes). None: a fresh one,
+    so nothing is frozen or held. A final render's cascades depend on its own frame
+    alone (frozen cascades aside): each box is a step function of what it must hold
+    (``cascades.quantizing``), so the render after a small camera move (the next frame
+    of a camera animation, or F12 again) mostly gets the same boxes."""
     state = ShadowViewState() if view_state is None else view_state
     state.follow_scene(snap.scene_name)
-    state.follow_frame(snap, casters)
+    viewport = bool(snap.is_viewport)
     s = snap.settings
     camera = snap.camera
     tiles = []
@@ -144,22 +145,23 @@ def plan_shadows(snap, bounds, depth_blocks=None, view_state=None, casters=None)
                 # Manual: exactly the margin the user typed, nothing added.
                 scene_bounds=bounds if s.occluder_margin_auto else None,
                 receiver_cache=state.receiver_cache)
-            # NOTE: every view (a viewport, and the final render from one render of a
-            # frame to the next of the same frame: ``ShadowViewState.follow_frame``) keeps
-            # the last fit while it still serves: the depth range while it holds the
-            # visible one, each cascade's box while it holds its receivers and is not much
-            # coarser than a fresh fit. A camera that moves a little then draws no shadow
-            # map again, and shadow edges do not pop.
+            # NOTE: a viewport keeps its last fit while it still serves: the depth range
+            # while it holds the visible one, each cascade's box while it holds its
+            # receivers and is not much coarser than a fresh fit. A final render keeps
+            # nothing (any process must render a frame of an animation to the same
+            # pixels): its depth range is on a fixed ladder and its boxes are quantized.
+            # Either way a camera that moves a little draws (almost) no shadow map again.
             if depth_blocks is not None and len(depth_blocks[2]) and s.fit_to_visible:
                 fitted = cascades.visible_depth_range(
                     float(depth_blocks[2].min()), float(depth_blocks[3].max()),
-                    previous=state.fitted_depth_range)
+                    previous=state.fitted_depth_range if viewport else None)
                 if fitted is not None:
                     # The fitted range has its own hybrid weight (Lambda (Fitted)): its
                     # near end is a surface, not the clip start (docs/soft-shadows.md).
                     arguments.update(depth_range=fitted, depth_blocks=depth_blocks,
                                      lam=float(s.fitted_split_lambda))
-            arguments.update(held=state.held_cascades)
+            arguments.update(held=state.held_cascades if viewport else None,
+                             quantize=not viewport)
             try:
                 result = cascades.compute_cascades(
                     camera.world_from_view, camera.projection, -snap.sun.to_light,
@@ -173,8 +175,9 @@ def plan_shadows(snap, bounds, depth_blocks=None, view_state=None, casters=None)
                     camera.world_from_view, camera.projection, -snap.sun.to_light,
                     **arguments)
             warnings.extend(result.notes)
-            state.fitted_depth_range = arguments.get("depth_range")
-            state.held_cascades = list(result.cascades)
+            if viewport:
+                state.fitted_depth_range = arguments.get("depth_range")
+                state.held_cascades = list(result.cascades)
             if s.freeze_cascades:
                 state.frozen = FrozenCascades(result, camera)
                 frozen_camera = camera

@@ -24,16 +24,15 @@ class ShadowViewState:
     """One view's shadow-planning state, carried from frame to frame.
 
     - ``frozen``: ``FrozenCascades`` while Freeze Cascades is on, else None.
-    - ``fitted_depth_range``: the visible depth range the cascades were last fitted to
-      (Fit to Visible Depth), held while the new one still fits
+    - ``fitted_depth_range`` (viewports): the visible depth range the cascades were last
+      fitted to (Fit to Visible Depth), held while the new one still fits
       (``cascades.visible_depth_range``), so the splits do not pop while the view moves.
-    - ``held_cascades``: the last frame's ``CascadeFit`` per cascade, each kept while it
-      still holds its receivers (``cascades.holding``): a view that moves a little keeps
-      its shadow maps. A final render keeps them (and the depth range) from the render
-      before only when both show the same frame number and the same objects in the same
-      places (``follow_frame``): F12 again after a small camera move redraws no shadow
-      map, while the frames of an animation depend on nothing but their own frame, so
-      any process (a farm's workers, ``-a``) renders each frame to the same pixels.
+    - ``held_cascades`` (viewports): the last frame's ``CascadeFit`` per cascade, each
+      kept while it still holds its receivers (``cascades.holding``): a view that moves a
+      little keeps its shadow maps. A final render keeps neither: its frames depend on
+      nothing but their own inputs, so any process (a farm's workers, ``-a``) renders
+      each frame to the same pixels; its boxes are quantized instead
+      (``cascades.quantizing``), which keeps them over small camera moves too.
     - ``receiver_cache``: the per-block terms of the last fit
       (``cascades.ReceiverTermsCache``), kept while the blocks and the camera stay.
 
@@ -45,7 +44,6 @@ class ShadowViewState:
         self.frozen = None
         self.fitted_depth_range = None
         self.held_cascades = None
-        self.frame = None       # (frame number, casters) of the last plan
         self.receiver_cache = ReceiverTermsCache()
 
     def follow_scene(self, scene_name):
@@ -53,16 +51,3 @@ class ShadowViewState:
         shows another scene must not draw with the first one's cascades."""
         if scene_name != self.scene_name:
             self.__init__(scene_name)
-
-    def follow_frame(self, snap, casters=None):
-        """Before planning ``snap`` (a ``FrameSnapshot``) of a scene whose objects are
-        ``casters`` (any value compared with ``==``: their meshes and matrices): a final
-        render of another frame number, or of other objects, than the render before
-        forgets the boxes and depth range that render was fitted with (frozen cascades
-        stay: Freeze Cascades holds them on purpose). A viewport keeps them: its frames
-        are one continuous stream."""
-        frame = (snap.frame, casters)
-        if not snap.is_viewport and frame != self.frame:
-            self.held_cascades = None
-            self.fitted_depth_range = None
-        self.frame = frame

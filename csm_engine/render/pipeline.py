@@ -104,17 +104,14 @@ class Pipeline:
     def benchmark_skip_gpu_calls(self, value):
         self.targets.benchmark_skip_gpu_calls = value
 
-    def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False, instances=None):
+    def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False):
         """This view's shadow planning, the one place the pipeline calls the planner: the
         frame's plan (``depth_blocks``: the visible depths Fit to Visible Depth fits to),
         or with ``gbuffer_only`` the plan a Fit to Visible Depth frame draws its G-buffer
-        with before those depths are known. ``instances`` (``InstanceArrays``): the
-        objects, whose meshes and matrices a final render's boxes are kept for."""
+        with before those depths are known."""
         if gbuffer_only:
             return gbuffer_plan(snap, bounds, view_state=self.view_state)
-        casters = None if instances is None else (instances.keys, instances.matrix_bytes)
-        return plan_shadows(snap, bounds, depth_blocks, view_state=self.view_state,
-                            casters=casters)
+        return plan_shadows(snap, bounds, depth_blocks, view_state=self.view_state)
 
     def _warn(self, messages):
         self.warnings.extend(w for w in messages if w not in self.warnings)
@@ -166,7 +163,7 @@ class Pipeline:
         # fields (the G-buffer reads only the camera from it).
         fit_to_visible = plan is None and bool(snap.settings.fit_to_visible)
         if plan is None:
-            plan = self._plan(snap, bounds, gbuffer_only=fit_to_visible, instances=instances)
+            plan = self._plan(snap, bounds, gbuffer_only=fit_to_visible)
         self._warn(snap.warnings + plan.warnings)
         # Allocated before the frame block is packed: a failed allocation halves the
         # plan's resolutions, which the block carries.
@@ -206,7 +203,7 @@ class Pipeline:
             gbuffer, gbuffer_kept, t = gbuffer_pass(t)
             blocks = self.visible_depth.blocks(targets, gbuffer, gbuffer_kept, width, height)
             t = self._sync(gbuffer.framebuffer, "depth_range", t)
-            plan = self._plan(snap, bounds, blocks, instances=instances)
+            plan = self._plan(snap, bounds, blocks)
             self._warn(plan.warnings)
             atlas = allocate_atlas(targets, plan, self.warnings)
             frame_ubo = targets.frame_ubo(pack_frame(snap, plan, like=frame_data))

@@ -110,7 +110,7 @@ def pipeline_drawing(plan):
     from csm_engine.render import pipeline
 
     class DrawsWithPlan(pipeline.Pipeline):
-        def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False, instances=None):
+        def _plan(self, snap, bounds, depth_blocks=None, gbuffer_only=False):
             return plan
 
     return DrawsWithPlan()

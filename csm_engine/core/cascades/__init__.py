@@ -10,7 +10,9 @@ the CPU without Blender. One module per concept:
   (``compute_cascades``);
 - ``receivers``: sample-distribution shadow maps (the visible depth range and each
   cascade's visible receivers);
-- ``holding``: a cascade's box kept from one frame to the next while it still serves;
+- ``holding``: a viewport's cascade box kept from one frame to the next while it still
+  serves;
+- ``quantizing``: a final render's cascade boxes, step functions of their receivers;
 - ``culling``: which casters may shadow a cascade or a point light's cube face;
 - ``light_frusta``: spot and point light shadow frusta.
 

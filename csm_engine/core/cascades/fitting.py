@@ -20,6 +20,7 @@ from ..camera import as_projection
 from ..checks import finite, matrix4, vector3
 from ..memo import ValueMemo
 from .holding import CascadeNeed, hold_cascade, lead_box
+from .quantizing import quantized_box, quantized_depths
 from .receivers import ReceiverTermsCache, receiver_square, rounded_square
 from .spaces import (_bounds, _box_corners, _check_rotation, _rigid_inverse,
                      _transform_points, light_view_matrix, orthographic_clip_from_view,
@@ -209,7 +210,8 @@ class _LightBox(NamedTuple):
 
 
 def _fit_checked(corners, rotation, resolution, stabilize, margin, scene_near,
-                 bounding_sphere_world, receiver_box, held=None, receivers=None):
+                 bounding_sphere_world, receiver_box, held=None, receivers=None,
+                 quantize=False):
     """``fit_cascade`` on checked inputs: (8, 3) corners, a 3x3 rotation, an int
     resolution, a float margin, the scene's ``_scene_near_depth`` or None, a (centre,
     radius) sphere or None. ``compute_cascades`` checks its inputs once per frame and calls
@@ -218,7 +220,8 @@ def _fit_checked(corners, rotation, resolution, stabilize, margin, scene_near,
     while it holds this frame's receivers (``holding.hold_cascade``); a refitted box is
     put ahead of them in the direction they moved (``holding.lead_box``). ``receivers``:
     the receivers' own rectangle (unrounded) that ``receiver_box`` was widened from; the
-    box must hold it (None: ``receiver_box`` itself)."""
+    box must hold it (None: ``receiver_box`` itself). ``quantize`` (stabilized only): the
+    box is ``_quantized_box`` of the receivers, whatever ``held``."""
     if not stabilize:
         box = _tight_box(corners, rotation, resolution, receiver_box)
         return _cascade_from_box(box, rotation, resolution, stabilize, margin, scene_near)
@@ -227,6 +230,11 @@ def _fit_checked(corners, rotation, resolution, stabilize, margin, scene_near,
     else:
         centre_world, radius = bounding_sphere_world
     radius = round_up_radius(max(radius, 1e-9))
+    if quantize:
+        box = _quantized_box(corners, rotation, resolution, centre_world, radius,
+                             receiver_box if receivers is None else receivers, margin,
+                             scene_near)
+        return _cascade_from_box(box, rotation, resolution, stabilize, 0.0, None)
     if receiver_box is None:
         box = _sphere_box(centre_world, radius, rotation, resolution)
     else:
@@ -247,10 +255,33 @@ def _fit_checked(corners, rotation, resolution, stabilize, margin, scene_near,
     return hold_cascade(held, fresh, need) if compatible else fresh
 
 
-def _need(corners, rotation, receiver_box, box, margin, scene_near):
-    """The ``holding.CascadeNeed`` of a stabilized fit: the slice's corners' rectangle in
-    the rotated light frame, cut to the receivers' (``receiver_box``) when there is one;
-    the depths the sphere's box spans (its near side pulled back by the margin)."""
+def _quantized_box(corners, rotation, resolution, centre_world, radius, receivers, margin,
+                   scene_near):
+    """The stabilized fit of a final render (``quantizing.quantized_box``): the box around
+    the slice's sphere (``radius`` rounded up), or around the receivers' rectangle
+    (unrounded) where that is smaller, its depths from the occluder margin before the
+    sphere to the sphere's far side, each on a coarse grid. Its near plane is final (the
+    margin is in it)."""
+    if receivers is None:
+        centre_xy = (rotation @ centre_world)[:2]
+        low, high = centre_xy - radius, centre_xy + radius
+    else:
+        low, high = _receivers_rectangle(corners, rotation, receivers)
+    centre_xy, texel = quantized_box(low, high, resolution, largest_half=radius)
+    half = 0.5 * resolution * texel
+    sphere_depth = -float(rotation[2] @ centre_world)
+    near_depth = sphere_depth - radius - margin
+    if scene_near is not None:
+        near_depth = min(near_depth, scene_near)
+    near_depth, far_depth = quantized_depths(near_depth, sphere_depth + radius,
+                                             2.0 * radius + margin)
+    return _LightBox(centre_xy, centre_xy - half, centre_xy + half, near_depth, far_depth,
+                     texel, centre_world, radius)
+
+
+def _receivers_rectangle(corners, rotation, receiver_box):
+    """(low, high) in the rotated light frame of the slice's corners' rectangle, cut to
+    the receivers' (``receiver_box``: centre and half widths) when there is one."""
     corners_xy = corners @ rotation[:2].T
     low, high = corners_xy.min(axis=0), corners_xy.max(axis=0)
     if receiver_box is not None:
@@ -259,6 +290,14 @@ def _need(corners, rotation, receiver_box, box, margin, scene_near):
         cut_low, cut_high = np.maximum(low, centre - half), np.minimum(high, centre + half)
         if np.all(cut_high >= cut_low):
             low, high = cut_low, cut_high
+    return low, high
+
+
+def _need(corners, rotation, receiver_box, box, margin, scene_near):
+    """The ``holding.CascadeNeed`` of a stabilized fit: the slice's corners' rectangle in
+    the rotated light frame, cut to the receivers' (``receiver_box``) when there is one;
+    the depths the sphere's box spans (its near side pulled back by the margin)."""
+    low, high = _receivers_rectangle(corners, rotation, receiver_box)
     sphere_depth = -float(rotation[2] @ box.sphere_centre)
     near_depth = sphere_depth - box.sphere_radius - margin
     if scene_near is not None:
@@ -426,7 +465,7 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
                      lam=0.5, manual=None, shadow_distance=None, base_resolution=2048,
                      equal_resolution=False, stabilize=True, occluder_margin=None,
                      scene_bounds=None, up_hint=None, blend_band=0.0, depth_range=None,
-                     depth_blocks=None, held=None, receiver_cache=None):
+                     depth_blocks=None, held=None, receiver_cache=None, quantize=False):
     """Splits and shadow boxes for one camera and one sun.
 
     - ``projection``: ``CameraProjection`` or an OpenGL ``clip_from_view`` matrix.
@@ -454,6 +493,10 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
       fit (``holding.hold_cascade``), so its shadow map need not be drawn again.
     - ``receiver_cache``: a ``receivers.ReceiverTermsCache`` the view keeps from frame to
       frame (None: one for this call).
+    - ``quantize`` (stabilized only; ``held`` is then not read): each box is a step
+      function of its receivers (``quantizing``): renders whose receivers differ a little
+      get the same boxes, and each box depends on this call's arguments alone (a final
+      render's).
 
     An orthographic view whose clip start is not above 0 (Blender's orthographic viewport
     clips from behind the eye) cannot use logarithmic splits; it falls back to uniform
@@ -521,17 +564,18 @@ def compute_cascades(world_from_view, projection, light_dir, count=3, scheme="HY
             # size) is bit-for-bit the same while the camera turns.
             centre_view, radius = view_sphere
             sphere = (_transform_points(world_from_view, centre_view[None])[0], radius)
-        before = held[index] if stabilize and held is not None and index < len(held) \
-            else None
+        before = held[index] if stabilize and not quantize and held is not None and \
+            index < len(held) else None
         square = receivers = None
         if depth_blocks is not None:
             receivers = receiver_square(world_from_view, projection, depth_blocks,
                                         slice_near, splits[index + 1], rotation, exact=True,
                                         cache=receiver_cache)
-            square = receivers if receivers is None or not stabilize else \
+            square = receivers if receivers is None or not stabilize or quantize else \
                 rounded_square(receivers, _room(receivers, before))
         fit = _fit_checked(_slice_corners(corners), rotation[:3, :3], resolution,
-                           stabilize, margin, scene_near, sphere, square, before, receivers)
+                           stabilize, margin, scene_near, sphere, square, before, receivers,
+                           quantize)
         fit.receiver_rectangle = square
         fit.split_near, fit.split_far = float(splits[index]), float(splits[index + 1])
         cascades.append(fit)

@@ -1,4 +1,5 @@
-"""Keeping a cascade's shadow box from one frame to the next while it still serves.
+"""Keeping a viewport's cascade box from one frame to the next while it still serves (a
+final render keeps nothing: its boxes are quantized, ``quantizing``).
 
 Owns ``CascadeNeed`` (what one cascade must cover this frame: the receivers' rectangle in
 the light's rotated frame and the depths along the light its box must span),

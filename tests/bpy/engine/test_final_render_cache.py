@@ -164,6 +164,44 @@ def test_animation_render_draws_each_frame(empty_scene, tmp_path, monkeypatch):
     assert sum(r.mesh_uploads for r in results) <= 2     # plane and cube, once
 
 
+def _camera_flight(scene, frames, turn=0.1):
+    """The scene camera keyed to move 2 cm and turn ``turn`` degrees further each frame."""
+    camera = scene.camera
+    for frame in range(1, frames + 1):
+        camera.keyframe_insert("location", frame=frame)
+        camera.keyframe_insert("rotation_euler", frame=frame)
+        camera.location.x += 0.02
+        camera.rotation_euler.z += np.radians(turn)
+
+
+def test_a_camera_animation_keeps_shadow_maps_and_each_frame_is_its_own(empty_scene):
+    """Each frame of a slow camera move (a new frame number, as -a renders it) draws few
+    shadow maps, the others kept from the frame before, and yet a frame's pixels are the
+    same whichever frame was rendered before it (a farm's worker renders it as -a does).
+    Fit to Visible Depth (the default) fits the boxes to what each frame sees."""
+    scene, _cube = _scene(empty_scene)
+    _camera_flight(scene, 6)
+    drawn, kept, images = [], [], {}
+    for frame in range(1, 7):
+        scene.frame_set(frame)
+        result = render_result(scene, W, H)
+        images[frame] = result.images["combined"].copy()
+        drawn.append(result.passes.shadow_tiles_drawn)
+        kept.append(result.passes.shadow_tiles_kept)
+    assert sum(kept[1:]) > sum(drawn[1:]), (drawn, kept)
+    assert _changed(images[1], images[6]) > 0.0, "the camera's move shows"
+    # Frame 9: the camera a metre further and turned 10 degrees more.
+    scene.camera.location.x += 1.0
+    scene.camera.rotation_euler.z += np.radians(10.0)
+    scene.camera.keyframe_insert("location", frame=9)
+    scene.camera.keyframe_insert("rotation_euler", frame=9)
+    for before, frame in ((9, 3), (9, 1), (5, 2)):
+        scene.frame_set(before)
+        render_result(scene, W, H)
+        scene.frame_set(frame)
+        assert np.array_equal(render_result(scene, W, H).images["combined"], images[frame])
+
+
 def test_objects_sharing_a_mesh_upload_it_once(empty_scene):
     scene, cube = _scene(empty_scene)
     for index in range(5):
