@@ -1,8 +1,8 @@
 """The tables the Principled BSDF reads (brdf.glsl), computed in numpy.
 
 Owns the GGX tables Cycles' Principled BSDF uses for direct light and layering, computed
-here by quadrature over the GGX distribution of visible normals (Heitz 2018) rather than
-shipped, and their packing into one float texture (``lut_texture_rows``):
+here by quadrature over the GGX distribution of visible normals (Heitz 2018,
+``compute_tables``), and their packing into one float texture (``lut_texture_rows``):
 
 - ``E(roughness, cos)``: the directional albedo of single-scattering GGX with Fresnel 1
   (Cycles' ``ggx_E``, 32 x 32), and ``E_avg(roughness)``, its cosine-weighted mean over the
@@ -17,13 +17,20 @@ shipped, and their packing into one float texture (``lut_texture_rows``):
 
 Table axes run over [0, 1] with nodes at i / (n - 1), read with linear interpolation as
 Cycles' ``lookup_table_read`` does; roughness is Principled Roughness (alpha = r^2), cos
-the cosine between the shading normal and the view. Pure and memoized (``ValueMemo``):
-the tables are computed once per process (~0.5 s). numpy only.
+the cosine between the shading normal and the view. The quadrature takes ~0.7 s here, a
+first render's worth, so its result ships as ``data/bsdf_tables.npz`` (written by
+``write_tables_file``; a unit test recomputes it and compares) and is read from there,
+once per process (``ValueMemo``); without the file the tables are computed. numpy only.
 """
+
+import os
 
 import numpy as np
 
 from .memo import ValueMemo
+from .paths import PACKAGE_DIR
+
+TABLES_FILE = os.path.join(PACKAGE_DIR, "data", "bsdf_tables.npz")
 
 E_SIZE = 32          # E, E_avg, s_schlick5: roughness x cos
 S_SIZE = 16          # s_ior: roughness x cos x z
@@ -117,7 +124,8 @@ def _lobe_samples(roughness, cos_view):
     return weight, np.clip(cos_hv, 0.0, 1.0)
 
 
-def _tables_uncached():
+def compute_tables():
+    """The tables by quadrature (what ``data/bsdf_tables.npz`` holds), float64."""
     nodes_e = np.linspace(0.0, 1.0, E_SIZE)
     rough, mu = np.meshgrid(nodes_e, nodes_e, indexing="ij")      # [roughness, cos]
     weight, cos_e = _lobe_samples(rough, mu)
@@ -139,6 +147,29 @@ def _tables_uncached():
         s = np.clip((fresnel_dielectric(cos_hv, eta) - f0) / (1.0 - f0), 0.0, 1.0)
         s_ior[k] = (valid * s).mean(axis=-1)
     return dict(e=e, e_avg=e_avg, s_ior=s_ior, s5=s5)
+
+
+_SHAPES = (("e", (E_SIZE, E_SIZE)), ("e_avg", (E_SIZE,)),
+           ("s_ior", (S_SIZE, S_SIZE, S_SIZE)), ("s5", (E_SIZE, E_SIZE)))
+
+
+def _tables_uncached():
+    try:
+        with np.load(TABLES_FILE) as shipped:
+            loaded = {name: np.array(shipped[name], dtype=np.float64)
+                      for name, _shape in _SHAPES}
+    except (OSError, KeyError, ValueError):
+        return compute_tables()
+    if any(loaded[name].shape != shape for name, shape in _SHAPES):
+        return compute_tables()
+    return loaded
+
+
+def write_tables_file(path=TABLES_FILE):
+    """Write the quadrature's tables to ``path`` (float32, as the texture holds them)."""
+    tables_now = compute_tables()
+    np.savez_compressed(path, **{name: tables_now[name].astype(np.float32)
+                                 for name, _shape in _SHAPES})
 
 
 _tables = ValueMemo(_tables_uncached, 1, key=lambda: ())

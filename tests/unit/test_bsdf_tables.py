@@ -52,3 +52,16 @@ def test_world_harmonics_give_the_irradiance_of_a_smooth_world():
     uniform = world_light.uniform_sh((0.3, 0.2, 0.1))
     assert world_light.irradiance(uniform, [0.0, 0.6, 0.8]) == \
         pytest.approx(np.pi * np.array([0.3, 0.2, 0.1]), rel=1e-4)
+
+
+def test_shipped_tables_are_the_quadratures():
+    """data/bsdf_tables.npz (read instead of computing at the first render) holds what the
+    quadrature computes now, to float32 rounding: regenerate it with
+    ``bsdf_tables.write_tables_file()`` after changing the quadrature."""
+    import numpy as np
+    fresh = bsdf_tables.compute_tables()
+    with np.load(bsdf_tables.TABLES_FILE) as shipped:
+        for name, values in fresh.items():
+            np.testing.assert_allclose(shipped[name], values, rtol=0, atol=1e-6,
+                                       err_msg=name)
+    assert bsdf_tables.tables()["e"].dtype == np.float64
