@@ -17,6 +17,7 @@
 #include "cascade_selection.glsl"
 #include "terminator.glsl"
 #include "debug_views.glsl"
+#include "background.glsl"
 
 #ifdef PASSES
 /* What the diffuse and specular layers reflect of every light so far (W/m^2/sr), for the
@@ -242,18 +243,6 @@ void write_surface_passes(Surface s, float ambient_visibility)
 #endif
 }
 
-/* The passes where no surface is (the World, a debug view's map): all zero; Environment is
- * Combined there (render/passes.py). */
-void write_no_surface_passes()
-{
-#ifdef PASSES
-  out_diffuse_light = vec4(0.0, 0.0, 0.0, 1.0);
-  out_specular_light = vec4(0.0);
-  out_diffuse_color = vec4(0.0);
-  out_specular_color = vec4(0.0);
-#endif
-}
-
 void main()
 {
   vec2 pixel = screen_uv * frame.viewport_size;
@@ -270,16 +259,13 @@ void main()
 
   float depth = texelFetch(gbuffer_depth, px, 0).r;
   if (depth <= 0.0) {
-    /* Background: the World colour; alpha 0 with Film > Transparent. */
-    out_color = vec4(frame.background_color, frame.background_alpha);
+    write_background();
 #ifdef WITH_DEBUG_VIEWS
     if (frame.debug_view == DEBUG_SHADOW_ERROR) {
       /* Black, so the view's surface pixels can be counted (render/shadow_volumes.py). */
       out_color = vec4(0.0, 0.0, 0.0, 1.0);
     }
 #endif
-    out_aux = vec4(1.0, -1.0, 1e10, 0.0);
-    write_no_surface_passes();
     return;
   }
 
