@@ -13,7 +13,6 @@ distance 0), nothing is allocated or drawn.
 from typing import NamedTuple
 
 from ..core.frame_layout import FRAME_LAYOUT
-from . import shaders
 from .gbuffer import programs_key
 from .resources import HeldAmbientOcclusion
 
@@ -32,7 +31,6 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
                            width, height):
     """The AO of ``gbuffer`` (``gbuffer.GBuffer``: its view depth and normals) with the
     frame block ``frame_ubo`` (``frame_data`` as numpy); None when AO is off."""
-    import gpu
     settings = snap.settings
     if not settings.ambient_occlusion or settings.ao_strength <= 0.0 or \
             settings.ao_distance <= 0.0:
@@ -42,7 +40,6 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
     rows = targets.texture("ao_rows", half_size, 'RGBA32F')
     blurred = targets.texture("ao", half_size, 'RG32F')
     searched = targets.texture("ao_searched", half_size, 'DEPTH_COMPONENT32F')
-    library = shaders.LIBRARY
     inputs = (programs_key(), FRAME_LAYOUT.field_bytes(frame_data, _AO_FRAME_FIELDS))
     frame_cache = targets.frame_cache
     held = frame_cache.ambient_occlusion
@@ -66,29 +63,14 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
                         (blurred_fb, (1.0, 0.0, 0.0, 0.0))):
         with fb.bind():
             targets.call(fb.clear, color=cleared)
-    for program, fb, source in (("ao_mask", mask_fb, None), ("ao", search_fb, None),
-                                ("ao_blur_rows", rows_fb, sums),
-                                ("ao_blur", blurred_fb, rows)):
-        shader = library.get(program)
-        with fb.bind():
-            gpu.state.viewport_set(0, 0, *half_size)
-            if program == "ao_mask":
-                gpu.state.depth_test_set('ALWAYS')
-                gpu.state.depth_mask_set(True)
-            else:
-                gpu.state.depth_test_set('GREATER')
-                gpu.state.depth_mask_set(False)
-            shader.bind()
-            shader.uniform_block("frame", frame_ubo)
-            if source is None:
-                shader.uniform_sampler("gbuffer_depth", gbuffer.view_depth)
-                if program == "ao":
-                    shader.uniform_sampler("gbuffer_normal", gbuffer.normal)
-            else:
-                shader.uniform_sampler("ao_half", source)
-            targets.call(targets.fullscreen_batch().draw, shader)
-    gpu.state.depth_test_set('NONE')
-    gpu.state.depth_mask_set(False)
+    depth = (("gbuffer_depth", gbuffer.view_depth),)
+    for program, fb, samplers, mode in (
+            ("ao_mask", mask_fb, depth, "MARK"),
+            ("ao", search_fb, depth + (("gbuffer_normal", gbuffer.normal),), "MASKED"),
+            ("ao_blur_rows", rows_fb, (("ao_half", sums),), "MASKED"),
+            ("ao_blur", blurred_fb, (("ao_half", rows),), "MASKED")):
+        targets.fullscreen_pass(program, fb, half_size[0], half_size[1], samplers,
+                                blocks=(("frame", frame_ubo),), depth=mode)
     if targets.records:
         frame_cache.ambient_occlusion = HeldAmbientOcclusion(blurred, inputs)
     return AmbientOcclusion(blurred, blurred_fb, False)

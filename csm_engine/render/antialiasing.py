@@ -131,34 +131,15 @@ def _draw_final_fxaa(targets, lit, color, width, height):
     pixel with its luma into a target of its own; the mark, depth 0 on edge pixels (depth
     only); and the blend, the edge walk under a depth test, so llvmpipe shades only the
     pixel blocks that hold an edge pixel. The same pixels as the one-pass program."""
-    import gpu
     luma = targets.texture("fxaa_luma", (width, height), 'R32F')
     mask = targets.texture("fxaa_mask", (width, height), 'DEPTH_COMPONENT32F')
     targets.fullscreen_pass("fxaa_luma", targets.framebuffer("fxaa_luma", colors=(color, luma)),
                             width, height, (("source", lit),))
-    batch = targets.fullscreen_batch()
-    for program, framebuffer in (
-            ("fxaa_mark", targets.framebuffer("fxaa_mark", depth=mask)),
-            ("fxaa_blend", targets.framebuffer("fxaa_blend", depth=mask, colors=(color,)))):
-        with framebuffer.bind():
-            gpu.state.viewport_set(0, 0, width, height)
-            gpu.state.blend_set('NONE')
-            if program == "fxaa_mark":
-                gpu.state.depth_test_set('ALWAYS')
-                gpu.state.depth_mask_set(True)
-            else:
-                # The full-screen triangle lies at depth 1: it passes where the mark wrote 0.
-                gpu.state.depth_test_set('GREATER')
-                gpu.state.depth_mask_set(False)
-            shader = shaders.LIBRARY.get(program)
-            shader.bind()
-            shader.uniform_sampler("luma", luma)
-            if program == "fxaa_blend":
-                shader.uniform_sampler("source", lit)
-            targets.call(batch.draw, shader)
-            gpu.state.depth_test_set('NONE')
-            if targets.profile and program == "fxaa_blend":   # wait for the GPU
-                framebuffer.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
+    targets.fullscreen_pass("fxaa_mark", targets.framebuffer("fxaa_mark", depth=mask),
+                            width, height, (("luma", luma),), depth="MARK")
+    targets.fullscreen_pass("fxaa_blend",
+                            targets.framebuffer("fxaa_blend", depth=mask, colors=(color,)),
+                            width, height, (("luma", luma), ("source", lit)), depth="MASKED")
 
 
 def _accumulate_in_place(targets, slot, mean, sample, share, width, height):

@@ -211,19 +211,42 @@ class Targets:
         Python-only frames, which draw nothing)."""
         return not self.benchmark_skip_gpu_calls
 
-    def fullscreen_pass(self, program, target_fb, width, height, samplers, floats=()):
-        """One full-screen triangle of ``program`` into ``target_fb``."""
+    def fullscreen_pass(self, program, target_fb, width, height, samplers, floats=(),
+                        blocks=(), depth=None):
+        """One full-screen triangle of ``program`` into ``target_fb``, without blending
+        (the blend state found is put back). ``blocks``: (name, uniform buffer) pairs.
+        ``depth``: for passes that split the screen by a depth target in ``target_fb``
+        (llvmpipe skips the shading of pixel blocks failing an early depth test, never an
+        ``if``): "MARK" writes the program's gl_FragDepth everywhere; "MASKED" shades
+        only where the mark wrote below 1 (the triangle lies at depth 1); None, no depth
+        test."""
         import gpu
         shader = shaders.LIBRARY.get(program)
+        blend = gpu.state.blend_get() if hasattr(gpu.state, "blend_get") else 'NONE'
         with target_fb.bind():
             gpu.state.viewport_set(0, 0, width, height)
-            gpu.state.depth_test_set('NONE')
+            if depth == "MARK":
+                gpu.state.depth_test_set('ALWAYS')
+                gpu.state.depth_mask_set(True)
+            elif depth == "MASKED":
+                gpu.state.depth_test_set('GREATER')
+                gpu.state.depth_mask_set(False)
+            else:
+                gpu.state.depth_test_set('NONE')
             gpu.state.blend_set('NONE')
             shader.bind()
+            for name, block in blocks:
+                shader.uniform_block(name, block)
             for name, texture in samplers:
                 shader.uniform_sampler(name, texture)
             for name, value in floats:
                 shader.uniform_float(name, value)
             self.call(self.fullscreen_batch().draw, shader)
+            gpu.state.depth_test_set('NONE')
+            gpu.state.depth_mask_set(False)
+            gpu.state.blend_set(blend)
             if self.profile:          # wait for the GPU, so the pass's time is its own
-                target_fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
+                if depth == "MARK":   # a depth-only target: a colour read waits for nothing
+                    target_fb.read_depth(0, 0, 1, 1)
+                else:
+                    target_fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
