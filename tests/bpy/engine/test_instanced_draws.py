@@ -79,8 +79,9 @@ def test_references_to_one_file_are_copies_of_one_mesh_at_the_file_transforms(co
     assert sum(np.linalg.det(m[:3, :3]) < 0 for m in found) == 16
 
 
-def test_instanced_draws_give_the_pixels_of_one_draw_per_object(copies_scene, monkeypatch):
-    scene, collection, _objects = copies_scene
+def _render_counting_matrix_uploads(scene, monkeypatch):
+    """A final render drawing every pass, and the number of copies of each instanced
+    matrix upload it made."""
     uploads = []
     real = instancing.matrix_texture
     monkeypatch.setattr(instancing, "matrix_texture",
@@ -88,6 +89,12 @@ def test_instanced_draws_give_the_pixels_of_one_draw_per_object(copies_scene, mo
     engine.forget_final_render_passes()
     instanced = engine.render_final(scene, keep_images=True)
     assert instanced.error is None, instanced.error
+    return instanced, uploads
+
+
+def test_instanced_draws_give_the_pixels_of_one_draw_per_object(copies_scene, monkeypatch):
+    scene, collection, _objects = copies_scene
+    instanced, uploads = _render_counting_matrix_uploads(scene, monkeypatch)
     # The G-buffer and each shadow tile drew the copies instanced (48 copies, fewer in a
     # tile that sees only some of them).
     assert len(uploads) >= 2 and max(uploads) == 48, uploads
@@ -174,13 +181,7 @@ def test_blenders_own_collection_instances_draw_instanced_with_the_same_pixels(
         empty.scale = (-1.0 if index % 4 == 1 else 1.0, 1.0, 0.8 + 0.1 * (index % 3))
         scene.collection.objects.link(empty)
     bpy.context.view_layer.update()
-    uploads = []
-    real = instancing.matrix_texture
-    monkeypatch.setattr(instancing, "matrix_texture",
-                        lambda matrices: uploads.append(len(matrices)) or real(matrices))
-    engine.forget_final_render_passes()
-    instanced = engine.render_final(scene, keep_images=True)
-    assert instanced.error is None, instanced.error
+    instanced, uploads = _render_counting_matrix_uploads(scene, monkeypatch)
     assert uploads and max(uploads) == 24, uploads      # 12 cones and 12 trunks
     monkeypatch.setattr(draw_lists.HeldDrawLists, "instancing", False)
     engine.forget_final_render_passes()
