@@ -27,6 +27,13 @@ def test_quick_benchmark_reports_both_engines_and_a_free_camera_redraw(tmp_path)
         assert scene["csm"]["median_s"] > 0 and scene["eevee"]["median_s"] > 0
         assert scene["ratio"] == scene["eevee"]["median_s"] / scene["csm"]["median_s"]
         assert scene["csm"]["flythrough_s"] > 0, scene["name"]
+        # Like for like: EEVEE renders the same camera animation.
+        assert scene["eevee"]["flythrough_s"] > 0, scene["name"]
+        assert scene["flythrough_ratio"] == \
+            scene["eevee"]["flythrough_s"] / scene["csm"]["flythrough_s"]
+        flight = scene["flythrough_split_s"]
+        for step in ("shadow", "gbuffer", "lighting", "wall"):
+            assert flight[step] > 0, (scene["name"], step, flight)
         split = scene["csm_split_s"]
         for step in ("mesh_upload", "python_setup", "shadow", "gbuffer", "lighting",
                      "readback"):
@@ -52,6 +59,7 @@ def test_quick_benchmark_reports_both_engines_and_a_free_camera_redraw(tmp_path)
     assert f"| field | {field['triangles']:,} |" in text and field_ratio in text
     flythrough = field["eevee"]["median_s"] / field["csm"]["flythrough_s"]
     assert "CSM fly-through" in text and f"| {flythrough:.1f}x |" in text
+    assert f"**{field['flythrough_ratio']:.1f}x** |" in text
 
 
 def test_markdown_page_without_markers_is_refused_before_the_run(tmp_path):
