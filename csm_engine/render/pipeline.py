@@ -117,15 +117,10 @@ class Pipeline:
         self.warnings.extend(w for w in messages if w not in self.warnings)
 
     def _sync(self, fb, name, start, depth_only=False):
-        """When profiling, wait for the GPU (a 1-pixel read) and record the pass time.
-        ``depth_only``: ``fb`` has no colour target, so its depth is read (a colour read
-        of it waits for nothing, and the pass's drawing would be counted in the next)."""
+        """When profiling, wait for the GPU (``Targets.wait_when_profiling``) and record
+        the pass time under ``name``; returns the time the next pass starts from."""
         if self.profile:
-            with fb.bind():
-                if depth_only:
-                    fb.read_depth(0, 0, 1, 1)
-                else:
-                    fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
+            self.targets.wait_when_profiling(fb, depth_only)
             self.timings[name] = time.perf_counter() - start
         return time.perf_counter()
 

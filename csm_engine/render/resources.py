@@ -245,8 +245,16 @@ class Targets:
             gpu.state.depth_test_set('NONE')
             gpu.state.depth_mask_set(False)
             gpu.state.blend_set(blend)
-            if self.profile:          # wait for the GPU, so the pass's time is its own
-                if depth == "MARK":   # a depth-only target: a colour read waits for nothing
-                    target_fb.read_depth(0, 0, 1, 1)
-                else:
-                    target_fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
+            self.wait_when_profiling(target_fb, depth_only=depth == "MARK")
+
+    def wait_when_profiling(self, fb, depth_only=False):
+        """When profiling, wait until the GPU has drawn into ``fb`` (a 1-pixel read), so
+        a pass's time is its own. ``depth_only``: ``fb`` has no colour target, so its depth
+        is read (a colour read of it would wait for nothing)."""
+        if not self.profile:
+            return
+        with fb.bind():
+            if depth_only:
+                fb.read_depth(0, 0, 1, 1)
+            else:
+                fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
