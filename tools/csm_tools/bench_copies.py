@@ -8,7 +8,7 @@ D distinct files x N copies, and renders each in a fresh process from the comman
 peak resident memory), and the same import rendered by EEVEE. Results go to
 docs/benchmarks.md ("Many copies of one mesh").
 
-    .venv/bin/python tools/csm_tools/bench_copies.py [--sizes 1000,10000,100000] [--distinct 10x10000]
+    ./dev bench-copies [--sizes 1000,10000,100000] [--distinct 10x10000] [--folder DIR]
 """
 
 import argparse
@@ -154,16 +154,27 @@ def run(sizes, distinct, folder, with_eevee=True):
 
 
 def main(argv=None):
-    parser = argparse.ArgumentParser(prog="bench_copies", description=__doc__.split("\n")[0])
-    parser.add_argument("--sizes", default="1000,10000,100000")
+    parser = argparse.ArgumentParser(prog="./dev bench-copies",
+                                     description=__doc__.split("\n")[0])
+    parser.add_argument("--sizes", default="1000,10000,100000",
+                        help="copies of one file per case, comma-separated")
     parser.add_argument("--distinct", default="10x10000",
                         help="files x copies cases, comma-separated ('' for none)")
     parser.add_argument("--no-eevee", action="store_true")
-    parser.add_argument("--folder", default=None)
+    parser.add_argument("--folder", default=None,
+                        help="where the scenes are written (default: a new temporary folder)")
     args = parser.parse_args(argv)
-    sizes = [int(s) for s in args.sizes.split(",") if s]
-    distinct = [tuple(int(v) for v in case.split("x")) for case in args.distinct.split(",")
-                if case]
+    try:
+        sizes = [int(s) for s in args.sizes.split(",") if s]
+        distinct = [tuple(int(v) for v in case.split("x")) for case in
+                    args.distinct.split(",") if case]
+    except ValueError:
+        parser.error(f"--sizes {args.sizes!r} / --distinct {args.distinct!r}: whole numbers "
+                     "like 1000,10000 and 10x10000")
+    if any(size < 1 for size in sizes) or any(len(case) != 2 or min(case) < 1
+                                               for case in distinct):
+        parser.error(f"--sizes {args.sizes!r} / --distinct {args.distinct!r}: at least 1 "
+                     "copy, and FILESxCOPIES for --distinct")
     folder = args.folder or tempfile.mkdtemp(prefix="csm_copies_")
     run(sizes, distinct, folder, not args.no_eevee)
 

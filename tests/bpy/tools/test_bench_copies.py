@@ -26,3 +26,11 @@ def test_the_benchmark_renders_each_scene_and_reports_time_and_memory(tmp_path):
     assert [(r["files"], r["copies"]) for r in rows] == [(1, 30), (2, 10)]
     for row in rows:
         assert row["csm_s"] > 0 and row["csm_mb"] > 100 and os.path.getsize(row["png"]) > 0
+
+
+def test_a_bad_size_is_one_clear_message(tmp_path):
+    for args in (("--sizes", "many"), ("--distinct", "10by100"), ("--sizes", "0")):
+        proc = run_module("bench_copies", *args, cwd=tmp_path, timeout=60)
+        assert proc.returncode == 2, args
+        assert args[1] in proc.stderr and "Traceback" not in proc.stderr, proc.stderr
+        assert not proc.stdout, args          # nothing was rendered
