@@ -100,7 +100,7 @@ PROGRAMS = {
         vertex="fullscreen_vert.glsl", fragment="depth_range_frag.glsl",
         inputs=(("pos", "VEC2"),),
         interface=(("screen_uv", "VEC2", "smooth"),),
-        push=(("INT", "source_is_view_depth"), ("INT", "step_texels")),
+        push=(("INT", "source_is_view_depth"),),
         samplers=(("FLOAT_2D", "source"),),
         frame=False,
         outputs=(("VEC4", "out_color"),),

@@ -1,10 +1,10 @@
 """The visible-depth reduction for Fit to Visible Depth (sample-distribution shadow maps).
 
 Owns ``VisibleDepth``: the G-buffer's view depth reduced on the GPU to the nearest and
-farthest depth per 8x8 block (a 4x4 and a 2x2 min/max step, ``depth_range_frag.glsl``)
-and read back; the CPU fits the cascades to those blocks (``core.shadow_plan``). Blocks of a kept
+farthest depth per 16x16 block (two 4x4 min/max steps, ``depth_range_frag.glsl``) and read
+back; the CPU fits the cascades to those blocks (``core.shadow_plan``). Blocks of a kept
 G-buffer are kept with it (the frame cache's ``depth_blocks``). Also owns
-``reduce_min_max``, the min/max steps on the GPU, which ``blocker_search`` runs over
+``reduce_min_max``, the 4x4 min/max steps on the GPU, which ``blocker_search`` runs over
 the shadow atlas too.
 """
 
@@ -18,15 +18,8 @@ class VisibleDepth:
     """One view's reduction; holds the last read-back, which stands in for the reduction
     in the benchmark's Python-only frames (nothing is drawn there to reduce)."""
 
-    # The G-buffer is reduced to blocks of 8 x 8 pixels: a 4x4 step, then a 2x2 one.
-    # NOTE: a block's receivers are its whole screen rectangle over its depth range, so
-    # a cascade's rectangle (and the quantized box fitted to it, ``core/cascades/
-    # quantizing.py``) jitters by up to a block as content moves through the blocks; the
-    # box's steps then toggle back and forth in a camera animation and its shadow map
-    # is redrawn. Blocks of 8 pixels halve that jitter (and the redraws) against 16,
-    # for 4x the blocks the planner reads (still a fraction of a millisecond).
-    DEPTH_BLOCK_STEPS = (4, 2)
-    DEPTH_BLOCK_PIXELS = 8
+    # The G-buffer is reduced to blocks of this many pixels on a side (two 4x4 steps).
+    DEPTH_BLOCK_PIXELS = 16
 
     def __init__(self):
         self._depth_pairs = None
@@ -43,12 +36,11 @@ class VisibleDepth:
         return blocks
 
     def _reduce(self, targets, view_depth, width, height):
-        """Nearest and farthest view depth per 8x8 block, by a 4x4 and a 2x2 min/max
-        reduction on the GPU and one read-back of the small result
+        """Nearest and farthest view depth per 16x16 block, by two 4x4 min/max reductions
+        on the GPU and one read-back of the small result
         (``shadow_plan.depth_blocks_from_reduction``)."""
         import gpu
-        target, fb = reduce_min_max(targets, "depth_range", view_depth, (width, height),
-                                    self.DEPTH_BLOCK_STEPS,
+        target, fb = reduce_min_max(targets, "depth_range", view_depth, (width, height), 2,
                                     source_is_view_depth=True)
         size = (target.width, target.height)
         if not targets.records:
@@ -68,20 +60,16 @@ class VisibleDepth:
 
 
 def reduce_min_max(targets, name, source, size, steps, source_is_view_depth=False):
-    """Min/max reductions of ``source`` (``size`` texels) on the GPU
-    (``depth_range_frag.glsl``), one per entry of ``steps`` (an int: that many 4x4 ones),
-    each of that many texels a side: per output texel the nearest (R) and farthest (G)
-    value of the block it covers (the product of ``steps`` texels a side). ``source_is_view_depth``: the G-buffer's view
+    """``steps`` 4x4 min/max reductions of ``source`` (``size`` texels) on the GPU
+    (``depth_range_frag.glsl``): per output texel the nearest (R) and farthest (G) value of
+    the 4^steps x 4^steps block it covers. ``source_is_view_depth``: the G-buffer's view
     depth, whose 0 (background) is left out. Returns the last RGBA32F target and its
     framebuffer (textures named ``<name>_<step>``)."""
     import gpu
     shader = shaders.LIBRARY.get("depth_range")
     is_view_depth = 1 if source_is_view_depth else 0
-    if isinstance(steps, int):
-        steps = (4,) * steps
-    for step, texels in enumerate(steps):
-        size = (max((size[0] + texels - 1) // texels, 1),
-                max((size[1] + texels - 1) // texels, 1))
+    for step in range(steps):
+        size = (max((size[0] + 3) // 4, 1), max((size[1] + 3) // 4, 1))
         target = targets.texture(f"{name}_{step}", size, 'RGBA32F')
         fb = targets.framebuffer(f"{name}_{step}", colors=(target,))
         with fb.bind():
@@ -90,7 +78,6 @@ def reduce_min_max(targets, name, source, size, steps, source_is_view_depth=Fals
             gpu.state.blend_set('NONE')
             shader.bind()
             shader.uniform_int("source_is_view_depth", is_view_depth)
-            shader.uniform_int("step_texels", texels)
             shader.uniform_sampler("source", source)
             targets.call(targets.fullscreen_batch().draw, shader)
         source, is_view_depth = target, 0
