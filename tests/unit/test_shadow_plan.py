@@ -57,40 +57,6 @@ def test_atlas_packs_tiles_without_overlap():
             assert x + size <= x2 or x2 + size2 <= x or y + size <= y2 or y2 + size2 <= y
 
 
-def test_final_renders_give_sun_cascades_spare_slots_that_overlap_nothing():
-    """Each sun cascade gets ``CASCADE_SLOTS`` - 1 spare slots of its size in a final
-    render (not in a viewport, nor with the soft filter); no tile or slot overlaps."""
-    snap = _snapshot(equal_resolution=True, cascade_count=4)
-    world_from_light = np.eye(4)
-    world_from_light[:3, 3] = (0.0, 0.0, 30.0)
-    snap.spots = [SpotLight(position=world_from_light[:3, 3],
-                            direction=np.array([0.0, 0.0, -1.0]), color=np.ones(3),
-                            radius=40.0, spot_size=math.radians(45), spot_blend=0.1,
-                            casts_shadow=True, world_from_light=world_from_light,
-                            clip_start=0.1)]
-    plan = shadow_plan.plan_shadows(snap, BOUNDS)
-    assert plan.cascade_slots == shadow_plan.CASCADE_SLOTS == 2
-    width, height = shadow_plan.layout_atlas(plan.tiles, plan.cascade_slots)
-    assert width <= shadow_plan.MAX_ATLAS_WIDTH
-    cascades = [t for t in plan.tiles if t.cascade is not None]
-    assert len(cascades) == 4 and len(plan.tiles) == 5
-    assert all(len(t.spare_origins) == 1 for t in cascades)
-    assert all(t.spare_origins == () for t in plan.tiles if t.cascade is None)
-    boxes = [(x, y, t.resolution) for t in plan.tiles
-             for x, y in (tuple(t.origin),) + t.spare_origins]
-    for i, (x, y, size) in enumerate(boxes):
-        assert x + size <= width and y + size <= height
-        for (x2, y2, size2) in boxes[i + 1:]:
-            assert x + size <= x2 or x2 + size2 <= x or y + size <= y2 or y2 + size2 <= y
-    viewport = _snapshot(equal_resolution=True, cascade_count=4)
-    viewport.is_viewport = True
-    assert shadow_plan.plan_shadows(viewport, BOUNDS).cascade_slots == 1
-    assert shadow_plan.plan_shadows(_snapshot(shadow_filter="SOFT"), BOUNDS).cascade_slots == 1
-    # One slot: the plain packing (four 2048 cascades fill the first 8192-wide shelf).
-    assert shadow_plan.layout_atlas(plan.tiles) == (8192, 2048 + 1024)
-    assert all(t.spare_origins == () for t in plan.tiles)
-
-
 def test_impossible_manual_splits_fall_back_to_hybrid_with_a_warning():
     plan = shadow_plan.plan_shadows(
         _snapshot(split_scheme="MANUAL", manual_splits=(0.5, 0.2, 0.6)), BOUNDS)
