@@ -34,16 +34,9 @@ POINT_SHADOW_RESOLUTION = 512      # texels per cube face
 # bilinear taps' extra texel) near a face's edge read rendered texels; wider kernels and
 # soft penumbrae there read the face's edge texels again (taps are clamped to the tile).
 POINT_FACE_MARGIN_TEXELS = 4
-# Atlas slots a final render's sun cascade has: the shadow map of a box it had a frame or
-# two before stays in its other slot. NOTE: a quantized box (cascades/quantizing.py)
-# often steps back and forth between two neighbours in a camera animation (its
-# receivers jitter across a step), and a box that comes back then finds its map drawn.
-# A map reads the same from any slot (texel offsets from its origin), so which slot a
-# frame uses leaves its pixels alone.
-CASCADE_SLOTS = 2
 
 __all__ = ["CASCADE_LINE_COLORS", "MAX_ATLAS_WIDTH", "SPOT_SHADOW_RESOLUTION",
-           "POINT_SHADOW_RESOLUTION", "POINT_FACE_MARGIN_TEXELS", "CASCADE_SLOTS", "ShadowTile", "ShadowPlan",
+           "POINT_SHADOW_RESOLUTION", "POINT_FACE_MARGIN_TEXELS", "ShadowTile", "ShadowPlan",
            "instance_bounds", "plan_shadows", "gbuffer_plan", "layout_atlas", "front_to_back",
            # re-exported
            "depth_blocks_from_reduction", "WINDOW_FROM_CLIP", "ambient_occlusion_fields",
@@ -67,9 +60,6 @@ class ShadowTile:
     # A point light's cube face: (light position, face index into
     # cascades.POINT_LIGHT_FACES, reach), for caster culling. None for other tiles.
     point_face: tuple = None
-    # A sun cascade's other atlas slots (``layout_atlas`` with ``slots``): origins where
-    # the maps of its boxes of the frames before may still be.
-    spare_origins: tuple = ()
 
     def texel_world_per_axis(self):
         """(x, y) scene units per texel (perspective: per unit of distance)."""
@@ -90,8 +80,6 @@ class ShadowPlan:
     warnings: list = None      # settings that could not be honoured, in the user's words
     point_shadow_count: int = 0    # the first this many snap.points have six tiles each,
     point_shadow_tiles: int = 0    # from this tile index on (+x, -x, +y, -y, +z, -z)
-    # Atlas slots per sun cascade (``CASCADE_SLOTS`` for final renders, else 1).
-    cascade_slots: int = 1
 
 
 def instance_bounds(instances, meshes):
@@ -235,12 +223,9 @@ def plan_shadows(snap, bounds, depth_blocks=None, view_state=None):
                     tile.far + tile.near - ndc * (tile.far - tile.near))
             else:
                 tile.display_near = tile.near + window * (tile.far - tile.near)
-    # A viewport holds its boxes (nothing steps back and forth); the soft filter reduces
-    # the whole atlas every frame a map is drawn, spare slots included.
-    slots = CASCADE_SLOTS if not viewport and s.shadow_filter != 'SOFT' else 1
     return ShadowPlan(tiles, count, np.asarray(splits, dtype=np.float64),
                       np.asarray(bands, dtype=np.float64), distance, spot_tiles, frozen_camera,
-                      warnings, point_shadow_count, point_shadow_tiles, slots)
+                      warnings, point_shadow_count, point_shadow_tiles)
 
 
 def _plan_point_shadows(points, resolution, tiles, warnings):
@@ -289,22 +274,14 @@ def gbuffer_plan(snap, bounds, view_state=None):
                       distance, {}, None, [])
 
 
-def layout_atlas(tiles, slots=1):
-    """Shelf-pack square tiles into one atlas, and with ``slots`` > 1 that many - 1 spare
-    slots for each sun cascade's tile after them (``ShadowTile.spare_origins``); returns
-    (width, height) in texels."""
+def layout_atlas(tiles):
+    """Shelf-pack square tiles into one atlas; returns (width, height) in texels."""
     x = y = row_height = width = 0
-    spares = [tile for tile in tiles if tile.cascade is not None] * (max(int(slots), 1) - 1)
     for tile in tiles:
-        tile.spare_origins = ()
-    for index, tile in enumerate(list(tiles) + spares):
         if x + tile.resolution > MAX_ATLAS_WIDTH and x > 0:
             x, y = 0, y + row_height
             row_height = 0
-        if index < len(tiles):
-            tile.origin = (x, y)
-        else:
-            tile.spare_origins += ((x, y),)
+        tile.origin = (x, y)
         x += tile.resolution
         row_height = max(row_height, tile.resolution)
         width = max(width, x)

@@ -40,13 +40,9 @@ class HeldAmbientOcclusion:
 @dataclass
 class AtlasTiles:
     """What each tile of one atlas texture holds: (origin, resolution) -> the
-    ``shadow_atlas.TileSignature`` it was drawn with; and (same keys) the render that
-    last used each (a count), so a cascade's new map goes into its least recently used
-    slot."""
+    ``shadow_atlas.TileSignature`` it was drawn with."""
     atlas: object
     tiles: dict
-    used: dict = None
-    renders: int = 0
 
 
 @dataclass

@@ -61,33 +61,23 @@ def same_tile(held, signature):
             held.caster_matrices != signature.caster_matrices or \
             held.casters != signature.casters:
         return False
-    return _same_light_matrix(held.clip_from_world, signature.clip_from_world)
-
-
-def _same_light_matrix(a, b):
-    """Whether tiles drawn with ``clip_from_world`` ``a`` and ``b`` hold the same depths:
-    rows 0, 1 and 3 the same bytes (a -0.0 for a 0.0 only redraws the tile), row 2 within
-    ``TILE_DEPTH_TOLERANCE``; bytes of slices cost less than numpy's comparisons here."""
+    a, b = held.clip_from_world, signature.clip_from_world
+    # Rows 0, 1 and 3 the same bytes (a -0.0 for a 0.0 only redraws the tile), row 2
+    # within the tolerance; bytes of slices cost less than numpy's comparisons here.
     return a[:2].tobytes() == b[:2].tobytes() and a[3].tobytes() == b[3].tobytes() and \
         float(np.abs(a[2] - b[2]).max()) <= TILE_DEPTH_TOLERANCE
 
 
 def allocate_atlas(targets, plan, warnings):
-    """The atlas and its partial-caster mask for ``plan``'s tiles, with ``plan``'s spare
-    slots for its sun cascades, each cascade's tile put in the slot that holds its map
-    (``_choose_slots``); on allocation failure, first without spare slots, then with the
-    tiles' resolutions halved (in ``plan``), said in ``warnings``."""
-    slots = plan.cascade_slots
+    """The atlas and its partial-caster mask for ``plan``'s tiles; on allocation failure,
+    halve the tiles' resolutions (in ``plan``) and say so in ``warnings``."""
     while True:
-        size = layout_atlas(plan.tiles, slots)
+        size = layout_atlas(plan.tiles)
         try:
             depth = targets.texture("atlas", size, 'DEPTH_COMPONENT32F')
             partial = targets.texture("atlas_partial", size, 'R8')
-            atlas = ShadowAtlas(depth, partial, targets.framebuffer("atlas", depth=depth))
+            return ShadowAtlas(depth, partial, targets.framebuffer("atlas", depth=depth))
         except Exception as error:
-            if slots > 1:
-                slots = 1
-                continue
             if all(t.resolution <= 64 for t in plan.tiles):
                 raise
             message = (f"shadow atlas {size[0]}x{size[1]} could not be allocated "
@@ -100,44 +90,14 @@ def allocate_atlas(targets, plan, warnings):
                     if tile.texel_world_xy is not None:
                         tile.texel_world_xy = tuple(2.0 * t for t in tile.texel_world_xy)
                 tile.resolution = max(tile.resolution // 2, 64)
-            continue
-        _choose_slots(_atlas_tiles(targets.frame_cache, atlas.depth), plan.tiles)
-        return atlas
-
-
-def _atlas_tiles(frame_cache, atlas):
-    """The ``AtlasTiles`` of ``atlas``; forgotten when the texture is reallocated."""
-    held = frame_cache.atlas_tiles
-    if held is None or held.atlas is not atlas:
-        held = frame_cache.atlas_tiles = AtlasTiles(atlas, {}, {})
-    return held
 
 
 def _held_tiles(frame_cache, atlas):
     """What each tile of ``atlas`` holds; forgotten when the texture is reallocated."""
-    return _atlas_tiles(frame_cache, atlas).tiles
-
-
-def _choose_slots(atlas_tiles, tiles):
-    """Put each tile that has spare slots (``ShadowTile.spare_origins``) in the slot that
-    holds a map of its light matrix, else in its least recently used slot (the one
-    holding the oldest box); the others become its spares. Casters are compared when
-    the tiles are drawn (``draw_shadow_atlas``): a slot whose casters changed is
-    redrawn there."""
-    held, used = atlas_tiles.tiles, atlas_tiles.used
-    atlas_tiles.renders += 1
-    for tile in tiles:
-        if not tile.spare_origins:
-            continue
-        slots = (tuple(tile.origin),) + tuple(tuple(o) for o in tile.spare_origins)
-        matrix = np.asarray(tile.clip_from_world, dtype=np.float64)
-        holding = [o for o in slots if held.get((o, tile.resolution)) is not None and
-                   _same_light_matrix(held[(o, tile.resolution)].clip_from_world, matrix)]
-        chosen = holding[0] if holding else \
-            min(slots, key=lambda o: used.get((o, tile.resolution), -1))
-        tile.origin = chosen
-        tile.spare_origins = tuple(o for o in slots if o != chosen)
-        used[(chosen, tile.resolution)] = atlas_tiles.renders
+    held = frame_cache.atlas_tiles
+    if held is None or held.atlas is not atlas:
+        held = frame_cache.atlas_tiles = AtlasTiles(atlas, {})
+    return held.tiles
 
 
 def draw_shadow_atlas(targets, snap, plan, atlas, lists, instances, signatures):
