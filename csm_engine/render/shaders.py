@@ -100,7 +100,7 @@ PROGRAMS = {
         vertex="fullscreen_vert.glsl", fragment="depth_range_frag.glsl",
         inputs=(("pos", "VEC2"),),
         interface=(("screen_uv", "VEC2", "smooth"),),
-        push=(("INT", "source_is_view_depth"),),
+        push=(),
         samplers=(("FLOAT_2D", "source"),),
         frame=False,
         outputs=(("VEC4", "out_color"),),
@@ -125,6 +125,8 @@ PROGRAMS = {
     ),
 }
 
+# The visible depth range's first step, over the G-buffer's view depth.
+PROGRAMS["depth_range_view"] = dict(PROGRAMS["depth_range"], defines=(("VIEW_DEPTH", "1"),))
 # A final render's FXAA in three passes (fxaa_frag.glsl, render/antialiasing.py): a copy
 # with the lumas; the edge mark (depth only); the edge walk where the mark's depth passes.
 PROGRAMS["fxaa_luma"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_LUMA", "1"),),
