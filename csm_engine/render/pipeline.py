@@ -193,8 +193,9 @@ class Pipeline:
         def gbuffer_pass(t):
             gbuffer, kept = draw_gbuffer(
                 targets, snap, cache, lists, instances, frame_ubo, frame_data, width, height,
-                ids, precise_normals=passes is not None and "Normal" in passes.names)
-            return gbuffer, kept, self._sync(gbuffer.framebuffer, "gbuffer", t)
+                ids)
+            # Its colour targets hold integers (gbuffer_layout.glsl): the depth is read.
+            return gbuffer, kept, self._sync(gbuffer.framebuffer, "gbuffer", t, True)
 
         t = time.perf_counter()
         if fit_to_visible:
@@ -202,7 +203,7 @@ class Pipeline:
             # view depth, then cascades fitted to that range, then their shadow maps.
             gbuffer, gbuffer_kept, t = gbuffer_pass(t)
             blocks = self.visible_depth.blocks(targets, gbuffer, gbuffer_kept, width, height)
-            t = self._sync(gbuffer.framebuffer, "depth_range", t)
+            t = self._sync(gbuffer.framebuffer, "depth_range", t, True)
             plan = self._plan(snap, bounds, blocks)
             self._warn(plan.warnings)
             atlas = allocate_atlas(targets, plan, self.warnings)

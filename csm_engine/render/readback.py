@@ -14,7 +14,7 @@ from .passes import LIGHTING_PASS_TARGETS
 # What each image is read from: (target, colour slot); the G-buffer's normal target is
 # the pipeline's own, the other two the final target's ("combined" from wherever the
 # anti-aliasing left it).
-READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("gbuffer", 1)}
+READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("gbuffer", 0)}
 # The light and colour passes' targets, in the final target's colour slots 2.. when a
 # render asks for them (render/passes.py).
 READS.update({name: ("final", 2 + slot) for slot, name in enumerate(LIGHTING_PASS_TARGETS)})
@@ -74,6 +74,9 @@ def read_images(snap, reads, final_fb, combined_fb, gbuffer_fb, with_positions=F
         fb = {"final": final_fb, "gbuffer": gbuffer_fb}[source]
         if name == "combined":
             fb, slot = combined_fb, 0
+        if name == "normal":
+            out[name] = read_normals(fb, width, height)[..., :channels]
+            continue
         count = width * height * channels
         buffer = gpu.types.Buffer('FLOAT', count) if memory is None \
             else memory.buffer(name, count)
@@ -92,6 +95,32 @@ def read_images(snap, reads, final_fb, combined_fb, gbuffer_fb, with_positions=F
         position[..., 3] = covered
         out["position"] = position
     return out
+
+
+def read_normals(gbuffer_fb, width, height):
+    """The G-buffer's world normals (its first target's octahedral ones,
+    ``gbuffer_layout.glsl``) as a (H, W, 4) float32 array (w 0), bottom row first."""
+    import gpu
+    buffer = gpu.types.Buffer('UINT', width * height * 4)
+    with gbuffer_fb.bind():
+        gbuffer_fb.read_color(0, 0, width, height, 4, 0, 'UINT', data=buffer)
+    packed = np.frombuffer(buffer, dtype=np.uint32).reshape(height, width, 4)[..., 2]
+    out = np.zeros((height, width, 4), dtype=np.float32)
+    out[..., :3] = octahedral_unpack(packed)
+    return out
+
+
+def octahedral_unpack(packed):
+    """The unit vectors of ``octahedral_pack`` (``gbuffer_layout.glsl``): two snorm16 in
+    each uint32 (x low, y high), as GLSL's unpackSnorm2x16 and octahedral_unpack."""
+    packed = np.asarray(packed, dtype=np.uint32)
+    halves = np.stack([packed & 0xFFFF, packed >> 16], axis=-1).astype(np.uint16)
+    p = np.clip(halves.view(np.int16).astype(np.float32) / 32767.0, -1.0, 1.0)
+    n = np.concatenate([p, 1.0 - np.abs(p[..., :1]) - np.abs(p[..., 1:])], axis=-1)
+    fold = np.maximum(-n[..., 2:], 0.0)
+    n[..., :2] += np.where(n[..., :2] >= 0.0, -fold, fold)
+    length = np.linalg.norm(n, axis=-1, keepdims=True)
+    return n / np.maximum(length, 1e-30)
 
 
 def read_target(framebuffer, slot, width, height, channels):

@@ -54,8 +54,9 @@ PROGRAMS = {
                   ("FLOAT_2D", "emission_texture"), ("FLOAT_2D", "surface_texture")),
         frame=True,
         material=True,      # MaterialData (core/material_layout.py) as "material"
-        outputs=(("VEC4", "out_albedo"), ("VEC4", "out_normal"), ("FLOAT", "out_depth"),
-                 ("VEC4", "out_facet"), ("VEC4", "out_emission"), ("VEC4", "out_coat")),
+        # The packed targets (gbuffer_layout.glsl), then those only some frames have.
+        outputs=(("UVEC4", "out_surface"), ("UVEC2", "out_depth"), ("VEC4", "out_emission"),
+                 ("VEC4", "out_coat")),
     ),
     "shadow": dict(
         vertex="shadow_vert.glsl", fragment="shadow_frag.glsl",
@@ -71,10 +72,9 @@ PROGRAMS = {
         inputs=(("pos", "VEC2"),),
         interface=(("screen_uv", "VEC2", "smooth"),),
         push=(),
-        samplers=(("FLOAT_2D", "gbuffer_albedo"), ("FLOAT_2D", "gbuffer_normal"),
-                  ("FLOAT_2D", "gbuffer_depth"), ("FLOAT_2D", "shadow_atlas"),
-                  ("FLOAT_2D", "shadow_partial"), ("FLOAT_2D", "gbuffer_emission"),
-                  ("FLOAT_2D", "gbuffer_facet")),
+        samplers=(("UINT_2D", "gbuffer_surface_target"), ("UINT_2D", "gbuffer_depth"),
+                  ("FLOAT_2D", "shadow_atlas"), ("FLOAT_2D", "shadow_partial"),
+                  ("FLOAT_2D", "gbuffer_emission")),
         frame=True,
         outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
     ),
@@ -100,7 +100,7 @@ PROGRAMS = {
         vertex="fullscreen_vert.glsl", fragment="depth_range_frag.glsl",
         inputs=(("pos", "VEC2"),),
         interface=(("screen_uv", "VEC2", "smooth"),),
-        push=(("INT", "source_is_view_depth"),),
+        push=(),
         samplers=(("FLOAT_2D", "source"),),
         frame=False,
         outputs=(("VEC4", "out_color"),),
@@ -133,6 +133,11 @@ PROGRAMS["fxaa_mark"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_MARK", "1"),),
                              samplers=(("FLOAT_2D", "luma"),), outputs=())
 PROGRAMS["fxaa_blend"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_BLEND", "1"),),
                               samplers=(("FLOAT_2D", "source"), ("FLOAT_2D", "luma")))
+
+# The depth range reduction's first step, which reads the G-buffer's packed view depth.
+PROGRAMS["depth_range_gbuffer"] = dict(PROGRAMS["depth_range"],
+                                       samplers=(("UINT_2D", "source"),),
+                                       defines=(("GBUFFER_SOURCE", "1"),))
 
 # NOTE: a fragment shader that may ``discard`` turns off the rasterizer's early depth test,
 # so every hidden fragment runs the whole shader (llvmpipe: about half the G-buffer cost).
@@ -193,10 +198,10 @@ for _name in [name for name in PROGRAMS
 _AO_COMMON = dict(vertex="fullscreen_vert.glsl", fragment="ao_frag.glsl",
                   inputs=(("pos", "VEC2"),), interface=(("screen_uv", "VEC2", "smooth"),),
                   push=(), frame=True)
-PROGRAMS["ao_mask"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),),
+PROGRAMS["ao_mask"] = dict(_AO_COMMON, samplers=(("UINT_2D", "gbuffer_depth"),),
                            outputs=(), depth_write="ANY", defines=(("AO_MASK", "1"),))
-PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
-                                            ("FLOAT_2D", "gbuffer_normal")),
+PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("UINT_2D", "gbuffer_depth"),
+                                            ("UINT_2D", "gbuffer_surface_target")),
                       outputs=(("VEC4", "out_ao_sums"),))
 PROGRAMS["ao_blur_rows"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "ao_half"),),
                                 outputs=(("VEC4", "out_ao_sums"),),
@@ -212,7 +217,7 @@ PROGRAMS["shadow_volume"] = dict(
     vertex="shadow_volume_vert.glsl", fragment="shadow_volume_frag.glsl",
     inputs=(("pos", "VEC3"),), interface=(("volume_depth", "FLOAT", "smooth"),),
     push=(("VEC4", "channel"),),
-    samplers=(("FLOAT_2D", "gbuffer_depth"),), frame=True,
+    samplers=(("UINT_2D", "gbuffer_depth"),), frame=True,
     outputs=(("VEC4", "out_count"),))
 
 # One lighting program per Shadow Filter setting (SHADOW_FILTER, see shadow_lookup.glsl): the

@@ -62,12 +62,11 @@ class VisibleDepth:
 def reduce_min_max(targets, name, source, size, steps, source_is_view_depth=False):
     """``steps`` 4x4 min/max reductions of ``source`` (``size`` texels) on the GPU
     (``depth_range_frag.glsl``): per output texel the nearest (R) and farthest (G) value of
-    the 4^steps x 4^steps block it covers. ``source_is_view_depth``: the G-buffer's view
-    depth, whose 0 (background) is left out. Returns the last RGBA32F target and its
+    the 4^steps x 4^steps block it covers. ``source_is_view_depth``: the G-buffer's (packed)
+    view depth target, whose 0 (background) is left out. Returns the last RGBA32F target and its
     framebuffer (textures named ``<name>_<step>``)."""
     import gpu
-    shader = shaders.LIBRARY.get("depth_range")
-    is_view_depth = 1 if source_is_view_depth else 0
+    is_view_depth = source_is_view_depth
     for step in range(steps):
         size = (max((size[0] + 3) // 4, 1), max((size[1] + 3) // 4, 1))
         target = targets.texture(f"{name}_{step}", size, 'RGBA32F')
@@ -76,9 +75,11 @@ def reduce_min_max(targets, name, source, size, steps, source_is_view_depth=Fals
             gpu.state.viewport_set(0, 0, size[0], size[1])
             gpu.state.depth_test_set('NONE')
             gpu.state.blend_set('NONE')
+            # The G-buffer's view depth is packed (gbuffer_layout.glsl).
+            shader = shaders.LIBRARY.get("depth_range_gbuffer" if is_view_depth
+                                         else "depth_range")
             shader.bind()
-            shader.uniform_int("source_is_view_depth", is_view_depth)
             shader.uniform_sampler("source", source)
             targets.call(targets.fullscreen_batch().draw, shader)
-        source, is_view_depth = target, 0
+        source, is_view_depth = target, False
     return source, fb
