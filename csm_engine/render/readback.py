@@ -14,7 +14,7 @@ from .passes import LIGHTING_PASS_TARGETS
 # What each image is read from: (target, colour slot); the G-buffer's normal target is
 # the pipeline's own, the other two the final target's ("combined" from wherever the
 # anti-aliasing left it).
-READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("gbuffer", 0)}
+READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("normals", 0)}
 # The light and colour passes' targets, in the final target's colour slots 2.. when a
 # render asks for them (render/passes.py).
 READS.update({name: ("final", 2 + slot) for slot, name in enumerate(LIGHTING_PASS_TARGETS)})
@@ -59,7 +59,7 @@ class ReadbackMemory:
         self._blocks = {}
 
 
-def read_images(snap, reads, final_fb, combined_fb, gbuffer_fb, with_positions=False,
+def read_images(snap, reads, final_fb, combined_fb, normals_fb, with_positions=False,
                 memory=None):
     """``reads``: image name ("combined", "aux", "normal", a ``LIGHTING_PASS_TARGETS``
     name) -> channels (1..4, from the first). Returns name -> (H, W, channels) float32,
@@ -71,12 +71,9 @@ def read_images(snap, reads, final_fb, combined_fb, gbuffer_fb, with_positions=F
     out = {}
     for name, channels in reads.items():
         source, slot = READS[name]
-        fb = {"final": final_fb, "gbuffer": gbuffer_fb}[source]
+        fb = {"final": final_fb, "normals": normals_fb}[source]
         if name == "combined":
             fb, slot = combined_fb, 0
-        if name == "normal":
-            out[name] = read_normals(fb, width, height)[..., :channels]
-            continue
         count = width * height * channels
         buffer = gpu.types.Buffer('FLOAT', count) if memory is None \
             else memory.buffer(name, count)
@@ -97,30 +94,20 @@ def read_images(snap, reads, final_fb, combined_fb, gbuffer_fb, with_positions=F
     return out
 
 
-def read_normals(gbuffer_fb, width, height):
-    """The G-buffer's world normals (its first target's octahedral ones,
-    ``gbuffer_layout.glsl``) as a (H, W, 4) float32 array (w 0), bottom row first."""
-    import gpu
-    buffer = gpu.types.Buffer('UINT', width * height * 4)
-    with gbuffer_fb.bind():
-        gbuffer_fb.read_color(0, 0, width, height, 4, 0, 'UINT', data=buffer)
-    packed = np.frombuffer(buffer, dtype=np.uint32).reshape(height, width, 4)[..., 2]
-    out = np.zeros((height, width, 4), dtype=np.float32)
-    out[..., :3] = octahedral_unpack(packed)
-    return out
-
-
-def octahedral_unpack(packed):
-    """The unit vectors of ``octahedral_pack`` (``gbuffer_layout.glsl``): two snorm16 in
-    each uint32 (x low, y high), as GLSL's unpackSnorm2x16 and octahedral_unpack."""
-    packed = np.asarray(packed, dtype=np.uint32)
-    halves = np.stack([packed & 0xFFFF, packed >> 16], axis=-1).astype(np.uint16)
-    p = np.clip(halves.view(np.int16).astype(np.float32) / 32767.0, -1.0, 1.0)
-    n = np.concatenate([p, 1.0 - np.abs(p[..., :1]) - np.abs(p[..., 1:])], axis=-1)
-    fold = np.maximum(-n[..., 2:], 0.0)
-    n[..., :2] += np.where(n[..., :2] >= 0.0, -fold, fold)
-    length = np.linalg.norm(n, axis=-1, keepdims=True)
-    return n / np.maximum(length, 1e-30)
+def unpack_normals(targets, gbuffer):
+    """The world normals of ``gbuffer`` (``gbuffer.GBuffer``, octahedral in its surface
+    target, ``gbuffer_layout.glsl``) unpacked on the GPU into a float target (xyz, 0 on
+    the background); returns its framebuffer, whose colour slot 0 ``read_images`` reads
+    as "normal"."""
+    # NOTE: a read-back of the integer target itself (framebuffer or texture) returned
+    # zeros here.
+    width, height = gbuffer.surface.width, gbuffer.surface.height
+    texture = targets.texture("normals_unpacked", (width, height), 'RGBA32F')
+    fb = targets.framebuffer("normals_unpacked", colors=(texture,))
+    targets.fullscreen_pass("gbuffer_normals", fb, width, height,
+                            (("gbuffer_surface_target", gbuffer.surface),
+                             ("gbuffer_depth", gbuffer.view_depth)))
+    return fb
 
 
 def read_target(framebuffer, slot, width, height, channels):

@@ -134,6 +134,11 @@ PROGRAMS["fxaa_mark"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_MARK", "1"),),
 PROGRAMS["fxaa_blend"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_BLEND", "1"),),
                               samplers=(("FLOAT_2D", "source"), ("FLOAT_2D", "luma")))
 
+# The G-buffer's normals unpacked for a read-back (the Normal pass).
+PROGRAMS["gbuffer_normals"] = dict(
+    PROGRAMS["depth_range"], fragment="gbuffer_normals_frag.glsl", on_demand=True,
+    samplers=(("UINT_2D", "gbuffer_surface_target"), ("UINT_2D", "gbuffer_depth")),
+    outputs=(("VEC4", "out_normal"),))
 # The depth range reduction's first step, which reads the G-buffer's packed view depth.
 PROGRAMS["depth_range_gbuffer"] = dict(PROGRAMS["depth_range"],
                                        samplers=(("UINT_2D", "source"),),
