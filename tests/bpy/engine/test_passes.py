@@ -191,8 +191,7 @@ def test_geometry_passes_match_eevee(empty_scene, tmp_path, pass_name, setting):
     else:
         # Normals: CSM's come from the G-buffer's octahedral 2 x 16-bit ones (within
         # ~6e-5), but Blender's own draws (EEVEE's) take vertex normals packed into 10-bit
-        # integers:
-        # measured max 1.6e-3, mean 1.1e-4 on the smooth sphere. Mist is 0..1.
+        # integers: measured max 1.6e-3, mean 1.1e-4 on the smooth sphere. Mist is 0..1.
         error = np.abs(ours - theirs)[covered].max(axis=-1)
         tolerance = 2e-3 if pass_name == "Normal" else 1e-3
     print(f"{pass_name}: CSM - EEVEE over {int(covered.sum())} pixels: max {error.max():.2e}, "
