@@ -109,10 +109,10 @@ void main()
   vec3 facet = cross(dFdx(world_position), dFdy(world_position));
   facet = dot(facet, facet) > 1e-30 ? normalize(facet) : n;
   facet = dot(facet, n) < 0.0 ? -facet : facet;
-  out_surface = uvec4(packHalf2x16(base.rg), packHalf2x16(vec2(base.b, specular)),
-                      octahedral_pack(n), octahedral_pack(facet));
-  out_depth = uvec2(floatBitsToUint(max(view_depth, 1e-6)),
-                    packHalf2x16(vec2(clamp(roughness, 0.0, 1.0), terminator_offset)));
+  out_surface = vec4(pack_halves(base.rg), pack_halves(vec2(base.b, specular)),
+                     octahedral_pack(n), octahedral_pack(facet));
+  out_depth = vec2(max(view_depth, 1e-6),
+                   pack_halves(vec2(clamp(roughness, 0.0, 1.0), terminator_offset)));
 #ifdef CRYPTOMATTE
   out_ids = vec4(cryptomatte_object, cryptomatte_material, cryptomatte_asset, 1.0);
 #endif

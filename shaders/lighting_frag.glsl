@@ -257,7 +257,7 @@ void main()
   }
 #endif
 
-  uvec4 depth_texel = texelFetch(gbuffer_depth, px, 0);
+  vec4 depth_texel = texelFetch(gbuffer_depth, px, 0);
   float depth = gbuffer_view_depth(depth_texel);
   if (depth <= 0.0) {
     write_background();

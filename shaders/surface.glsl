@@ -44,11 +44,11 @@ vec3 world_position_at(vec2 uv, float view_depth)
 
 /* The surface at G-buffer pixel px (screen position uv 0..1), whose gbuffer_depth texel is
  * `depth_texel` (gbuffer_layout.glsl) and view depth `depth` (above 0: not background). */
-Surface gbuffer_surface(ivec2 px, vec2 uv, uvec4 depth_texel, float depth)
+Surface gbuffer_surface(ivec2 px, vec2 uv, vec4 depth_texel, float depth)
 {
-  uvec4 surface_texel = texelFetch(gbuffer_surface_target, px, 0);
-  vec4 albedo_spec = vec4(unpackHalf2x16(surface_texel.x), unpackHalf2x16(surface_texel.y));
-  vec2 roughness_offset = unpackHalf2x16(depth_texel.y);
+  vec4 surface_texel = texelFetch(gbuffer_surface_target, px, 0);
+  vec4 albedo_spec = vec4(unpack_halves(surface_texel.x), unpack_halves(surface_texel.y));
+  vec2 roughness_offset = unpack_halves(depth_texel.y);
 #ifdef SURFACE_EMISSION
   vec4 emission_metallic = texelFetch(gbuffer_emission, px, 0);
 #else

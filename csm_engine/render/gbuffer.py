@@ -30,8 +30,8 @@ _GBUFFER_FRAME_FIELDS = ("clip_from_world", "camera_position", "camera_forward",
 
 
 class GBuffer(NamedTuple):
-    surface: object         # RGBA32UI: base colour, specular, normals (gbuffer_layout.glsl)
-    view_depth: object      # RG32UI: view depth, roughness, terminator offset (likewise)
+    surface: object         # base colour, specular, normals (gbuffer_layout.glsl)
+    view_depth: object      # view depth, roughness, terminator offset (likewise)
     emission: object
     depth: object
     framebuffer: object
@@ -67,8 +67,8 @@ def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, 
     what it would draw (the frame cache's ``gbuffer``). ``ids`` (``passes.DrawIds``): also
     write the Cryptomatte IDs, with the CRYPTOMATTE programs into one more target (such a
     G-buffer is always drawn, never kept). Returns (``GBuffer``, whether it was kept)."""
-    surface = targets.texture("surface", (width, height), 'RGBA32UI')
-    view_depth = targets.texture("view_depth", (width, height), 'RG32UI')
+    surface = targets.texture("surface", (width, height), 'RGBA32F')
+    view_depth = targets.texture("view_depth", (width, height), 'RG32F')
     depth = targets.gbuffer_depth(width, height)
     emission = targets.texture("emission", (width, height), 'RGBA16F')
     coat = targets.texture("coat", (width, height), 'RGBA16F')

@@ -55,7 +55,7 @@ PROGRAMS = {
         frame=True,
         material=True,      # MaterialData (core/material_layout.py) as "material"
         # The packed targets (gbuffer_layout.glsl), then those only some frames have.
-        outputs=(("UVEC4", "out_surface"), ("UVEC2", "out_depth"), ("VEC4", "out_emission"),
+        outputs=(("VEC4", "out_surface"), ("VEC2", "out_depth"), ("VEC4", "out_emission"),
                  ("VEC4", "out_coat")),
     ),
     "shadow": dict(
@@ -72,7 +72,7 @@ PROGRAMS = {
         inputs=(("pos", "VEC2"),),
         interface=(("screen_uv", "VEC2", "smooth"),),
         push=(),
-        samplers=(("UINT_2D", "gbuffer_surface_target"), ("UINT_2D", "gbuffer_depth"),
+        samplers=(("FLOAT_2D", "gbuffer_surface_target"), ("FLOAT_2D", "gbuffer_depth"),
                   ("FLOAT_2D", "shadow_atlas"), ("FLOAT_2D", "shadow_partial"),
                   ("FLOAT_2D", "gbuffer_emission")),
         frame=True,
@@ -137,11 +137,11 @@ PROGRAMS["fxaa_blend"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_BLEND", "1"),),
 # The G-buffer's normals unpacked for a read-back (the Normal pass).
 PROGRAMS["gbuffer_normals"] = dict(
     PROGRAMS["depth_range"], fragment="gbuffer_normals_frag.glsl", on_demand=True,
-    samplers=(("UINT_2D", "gbuffer_surface_target"), ("UINT_2D", "gbuffer_depth")),
+    samplers=(("FLOAT_2D", "gbuffer_surface_target"), ("FLOAT_2D", "gbuffer_depth")),
     outputs=(("VEC4", "out_normal"),))
 # The depth range reduction's first step, which reads the G-buffer's packed view depth.
 PROGRAMS["depth_range_gbuffer"] = dict(PROGRAMS["depth_range"],
-                                       samplers=(("UINT_2D", "source"),),
+                                       samplers=(("FLOAT_2D", "source"),),
                                        defines=(("GBUFFER_SOURCE", "1"),))
 
 # NOTE: a fragment shader that may ``discard`` turns off the rasterizer's early depth test,
@@ -203,10 +203,10 @@ for _name in [name for name in PROGRAMS
 _AO_COMMON = dict(vertex="fullscreen_vert.glsl", fragment="ao_frag.glsl",
                   inputs=(("pos", "VEC2"),), interface=(("screen_uv", "VEC2", "smooth"),),
                   push=(), frame=True)
-PROGRAMS["ao_mask"] = dict(_AO_COMMON, samplers=(("UINT_2D", "gbuffer_depth"),),
+PROGRAMS["ao_mask"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),),
                            outputs=(), depth_write="ANY", defines=(("AO_MASK", "1"),))
-PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("UINT_2D", "gbuffer_depth"),
-                                            ("UINT_2D", "gbuffer_surface_target")),
+PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
+                                            ("FLOAT_2D", "gbuffer_surface_target")),
                       outputs=(("VEC4", "out_ao_sums"),))
 PROGRAMS["ao_blur_rows"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "ao_half"),),
                                 outputs=(("VEC4", "out_ao_sums"),),
@@ -222,7 +222,7 @@ PROGRAMS["shadow_volume"] = dict(
     vertex="shadow_volume_vert.glsl", fragment="shadow_volume_frag.glsl",
     inputs=(("pos", "VEC3"),), interface=(("volume_depth", "FLOAT", "smooth"),),
     push=(("VEC4", "channel"),),
-    samplers=(("UINT_2D", "gbuffer_depth"),), frame=True,
+    samplers=(("FLOAT_2D", "gbuffer_depth"),), frame=True,
     outputs=(("VEC4", "out_count"),))
 
 # One lighting program per Shadow Filter setting (SHADOW_FILTER, see shadow_lookup.glsl): the
