@@ -99,8 +99,7 @@ def unpack_normals(targets, gbuffer):
     target, ``gbuffer_layout.glsl``) unpacked on the GPU into a float target (xyz, 0 on
     the background); returns its framebuffer, whose colour slot 0 ``read_images`` reads
     as "normal"."""
-    # NOTE: a read-back of the integer target itself (framebuffer or texture) returned
-    # zeros here.
+    # Unpacked where the packing is written (gbuffer_layout.glsl), not again in numpy.
     width, height = gbuffer.surface.width, gbuffer.surface.height
     texture = targets.texture("normals_unpacked", (width, height), 'RGBA32F')
     fb = targets.framebuffer("normals_unpacked", colors=(texture,))
