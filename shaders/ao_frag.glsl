@@ -31,6 +31,8 @@
  *
  * Inputs: the G-buffer's view depth (0 = background) and world normal. */
 
+#include "gbuffer_layout.glsl"
+
 #define AO_PI 3.14159265358979
 #define AO_STEPS 7             /* per side of a slice */
 #define AO_MAX_RADIUS 256.0    /* pixels: a nearby occluder farther on screen is missed */
@@ -88,7 +90,7 @@ float ao_radius_px(float d)
 void main()
 {
   ivec2 p = min(ivec2(gl_FragCoord.xy) * 2, ivec2(frame.viewport_size) - 1);
-  gl_FragDepth = ao_radius_px(texelFetch(gbuffer_depth, p, 0).r) >= 1.5 ? 0.0 : 1.0;
+  gl_FragDepth = ao_radius_px(gbuffer_view_depth(texelFetch(gbuffer_depth, p, 0))) >= 1.5 ? 0.0 : 1.0;
 }
 
 #elif !defined(AO_BLUR)
@@ -149,14 +151,14 @@ void main()
   ivec2 size = ivec2(frame.viewport_size);
   ivec2 ao_pixel = ivec2(gl_FragCoord.xy);
   ivec2 p = min(ao_pixel * 2, size - 1);
-  float depth = texelFetch(gbuffer_depth, p, 0).r;
+  float depth = gbuffer_view_depth(texelFetch(gbuffer_depth, p, 0));
   float radius_px = ao_radius_px(depth);
   /* Drawn only where the mask found something to search; a pixel of a block drawn for
    * its neighbours takes no step and is "open". */
   bool searched = radius_px >= 1.5;
   radius_px = searched ? radius_px : -1.0;
   vec3 center = ao_view_position(p, depth);
-  vec3 n = normalize(mat3(frame.view_from_world) * texelFetch(gbuffer_normal, p, 0).xyz);
+  vec3 n = normalize(mat3(frame.view_from_world) * octahedral_unpack(texelFetch(gbuffer_surface_target, p, 0).z));
   vec3 v = frame.is_perspective != 0 ? normalize(-center) : vec3(0.0, 0.0, 1.0);
   /* View-space xy of full-resolution pixel q at depth d: (q * ray_scale + ray_offset) * d
    * (times 1 in an orthographic view), as ao_view_position. */
@@ -203,7 +205,7 @@ void main()
     for (int side = 0; side < 2; side++) {
       /* Off the screen: the border pixel, a real surface point (none beyond it). */
       ivec2 q = clamp(p + ivec2(side == 0 ? offset : -offset), ivec2(0), size - 1);
-      float d = texelFetch(gbuffer_depth, q, 0).r;
+      float d = gbuffer_view_depth(texelFetch(gbuffer_depth, q, 0));
       vec3 delta = vec3((vec2(q) * ray_scale + ray_offset) * mix(1.0, d, perspective), -d) -
                    center;
       float dist2 = dot(delta, delta);

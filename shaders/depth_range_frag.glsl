@@ -1,7 +1,9 @@
 /* One step of the visible depth range reduction (sample-distribution shadow maps): each
  * output pixel takes the nearest and farthest view depth of the 4x4 source pixels it covers,
- * as (nearest, farthest). The first step (VIEW_DEPTH) reads the G-buffer's view depth, where
- * 0 is background (nothing to shadow); later steps read the previous step's pairs. */
+ * as (nearest, farthest). The first step (VIEW_DEPTH) reads the G-buffer's view depth (the
+ * first channel of its gbuffer_depth target, a plain float: gbuffer_layout.glsl), where 0 is
+ * background (nothing to shadow); later steps read the previous step's pairs. Steps repeat
+ * until one pixel holds the whole image's range. */
 const float NOTHING = 3.0e38;
 
 void main()

@@ -1,11 +1,11 @@
 /* G-buffer pass, fragment stage: one material (MaterialData, core/material_layout.py) per
  * draw.
- * out_albedo   = base colour rgb, specular: the dielectric layer's F0 / 0.08 (Specular IOR
- *                Level at IOR 1.5)
- * out_normal   = world normal xyz (normal-mapped where the material has a map), roughness
- * out_depth    = view depth along the camera's forward axis (0 = background)
- * out_facet    = the triangle's own normal xyz (on the shading normal's side), the
- *                object's Shadow Terminator Geometry Offset
+ * out_surface  = base colour rgb; specular: the dielectric layer's F0 / 0.08 (Specular IOR
+ *                Level at IOR 1.5); world normal (normal-mapped where the material has a
+ *                map); the triangle's own normal (on the shading normal's side), packed as
+ *                gbuffer_layout.glsl says
+ * out_depth    = view depth along the camera's forward axis (0 = background); roughness and
+ *                the object's Shadow Terminator Geometry Offset, packed likewise
  * out_emission = emitted radiance rgb (W/m^2/sr, EEVEE's units), metallic
  * out_coat     = Principled Coat weight, roughness, IOR
  * out_ids      = (CRYPTOMATTE programs only, in out_coat's place: they draw the G-buffer
@@ -13,6 +13,7 @@
  *                Cryptomatte IDs (core/cryptomatte.py), 1 */
 
 #include "alpha_hash.glsl"
+#include "gbuffer_layout.glsl"
 
 /* The course's Blinn-Phong exponent -> roughness, the inverse of the Beckmann-style
  * exponent 2 / r^4 - 2. */
@@ -98,9 +99,6 @@ void main()
     emission *= texture(emission_texture, tex_coord).rgb;
   }
 #endif
-  out_albedo = vec4(base.rgb, specular);
-  out_normal = vec4(n, clamp(roughness, 0.0, 1.0));
-  out_depth = max(view_depth, 1e-6);
   out_emission = vec4(emission, clamp(metallic, 0.0, 1.0));
 #ifndef CRYPTOMATTE
   out_coat = vec4(material.coat_weight, material.coat_roughness, material.coat_ior, 0.0);
@@ -110,7 +108,11 @@ void main()
    * normal is on. */
   vec3 facet = cross(dFdx(world_position), dFdy(world_position));
   facet = dot(facet, facet) > 1e-30 ? normalize(facet) : n;
-  out_facet = vec4(dot(facet, n) < 0.0 ? -facet : facet, terminator_offset);
+  facet = dot(facet, n) < 0.0 ? -facet : facet;
+  out_surface = vec4(pack_halves(base.rg), pack_halves(vec2(base.b, specular)),
+                     octahedral_pack(n), octahedral_pack(facet));
+  out_depth = vec2(max(view_depth, 1e-6),
+                   pack_halves(vec2(clamp(roughness, 0.0, 1.0), terminator_offset)));
 #ifdef CRYPTOMATTE
   out_ids = vec4(cryptomatte_object, cryptomatte_material, cryptomatte_asset, 1.0);
 #endif

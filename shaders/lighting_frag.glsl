@@ -257,7 +257,8 @@ void main()
   }
 #endif
 
-  float depth = texelFetch(gbuffer_depth, px, 0).r;
+  vec4 depth_texel = texelFetch(gbuffer_depth, px, 0);
+  float depth = gbuffer_view_depth(depth_texel);
   if (depth <= 0.0) {
     write_background();
 #ifdef WITH_DEBUG_VIEWS
@@ -269,7 +270,7 @@ void main()
     return;
   }
 
-  Surface surface = gbuffer_surface(px, screen_uv, depth);
+  Surface surface = gbuffer_surface(px, screen_uv, depth_texel, depth);
   float ambient_visibility;
   vec3 color = ambient_light(surface, px, ambient_visibility);
   float sun_visibility;

@@ -7,11 +7,13 @@
  * 1e-7 of the depth). Wider lets a volume's side that passes just in front of a surface
  * count wrongly: at 1e-4 a distant caster's shadow edge crept a centimetre up a wall
  * 80 m away. */
+#include "gbuffer_layout.glsl"
+
 const float VOLUME_DEPTH_TOLERANCE = 1e-5;
 
 void main()
 {
-  float surface = texelFetch(gbuffer_depth, ivec2(gl_FragCoord.xy), 0).r;
+  float surface = gbuffer_view_depth(texelFetch(gbuffer_depth, ivec2(gl_FragCoord.xy), 0));
   /* NOTE: a volume's caps lie on its caster's own triangles, where the G-buffer holds the
    * same depth up to rounding: such a face counts as behind (the tolerance), which keeps a
    * lit open surface (its own cap in front, the rest of its prism behind) at zero. */

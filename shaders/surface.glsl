@@ -6,6 +6,7 @@
  * only by those with SURFACE_COAT (render/lighting.py picks them for frames whose
  * materials write them). */
 #include "brdf.glsl"
+#include "gbuffer_layout.glsl"
 
 /* One pixel's surface. Positions and distances in scene units, normals unit length. */
 struct Surface {
@@ -41,12 +42,13 @@ vec3 world_position_at(vec2 uv, float view_depth)
   return mix(near_point, far_point, (view_depth - near_depth) / (far_depth - near_depth));
 }
 
-/* The surface at G-buffer pixel px (screen position uv 0..1), whose view depth is `depth`
- * (above 0: not background). */
-Surface gbuffer_surface(ivec2 px, vec2 uv, float depth)
+/* The surface at G-buffer pixel px (screen position uv 0..1), whose gbuffer_depth texel is
+ * `depth_texel` (gbuffer_layout.glsl) and view depth `depth` (above 0: not background). */
+Surface gbuffer_surface(ivec2 px, vec2 uv, vec4 depth_texel, float depth)
 {
-  vec4 albedo_spec = texelFetch(gbuffer_albedo, px, 0);
-  vec4 normal_shine = texelFetch(gbuffer_normal, px, 0);
+  vec4 surface_texel = texelFetch(gbuffer_surface_target, px, 0);
+  vec4 albedo_spec = vec4(unpack_halves(surface_texel.x), unpack_halves(surface_texel.y));
+  vec2 roughness_offset = unpack_halves(depth_texel.y);
 #ifdef SURFACE_EMISSION
   vec4 emission_metallic = texelFetch(gbuffer_emission, px, 0);
 #else
@@ -57,9 +59,9 @@ Surface gbuffer_surface(ivec2 px, vec2 uv, float depth)
   Surface s;
   s.view_depth = depth;
   s.position = world_position_at(uv, depth);
-  s.normal = normalize(normal_shine.xyz);
+  s.normal = octahedral_unpack(surface_texel.z);
   /* The plane the shadow lookup's receiver-plane taps follow: the surface's own facet
-   * (the G-buffer's facet target, exact per triangle), because the map holds the
+   * (the G-buffer's facet, exact per triangle), because the map holds the
    * geometry's depth, not the shading normal's idea of it (smooth shading and normal maps
    * tilt it). Ground truth, mismatch against Cycles: point_lights 0.18 % with the shading
    * normal only, 0.128 % with a facet from this pass's 2x2 pixel derivatives (wrong where
@@ -67,15 +69,12 @@ Surface gbuffer_surface(ivec2 px, vec2 uv, float depth)
   vec2 depth_derivatives = vec2(dFdx(depth), dFdy(depth));
   float depth_step = max(abs(depth_derivatives.x), abs(depth_derivatives.y));
   s.depth_slope = depth_step < 0.05 * depth ? depth_derivatives : vec2(0.0);
-  /* The triangle's own plane (the G-buffer's facet target), on the shading normal's side;
-   * w: the object's Shadow Terminator Geometry Offset. */
-  vec4 facet_target = texelFetch(gbuffer_facet, px, 0);
-  vec3 facet = facet_target.xyz;
-  s.shadow_normal = dot(facet, facet) > 0.5 ? normalize(facet) : s.normal;
-  s.terminator_offset = facet_target.w;
+  /* The triangle's own plane (the G-buffer's facet), on the shading normal's side. */
+  s.shadow_normal = octahedral_unpack(surface_texel.w);
+  s.terminator_offset = roughness_offset.y;
   s.albedo = albedo_spec.rgb;
   s.specular = albedo_spec.a;
-  s.roughness = normal_shine.w;
+  s.roughness = roughness_offset.x;
   s.metallic = emission_metallic.a;
   s.emission = emission_metallic.rgb;
 #ifdef SURFACE_COAT

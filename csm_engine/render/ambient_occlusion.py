@@ -66,7 +66,7 @@ def draw_ambient_occlusion(targets, snap, frame_ubo, frame_data, gbuffer, gbuffe
     depth = (("gbuffer_depth", gbuffer.view_depth),)
     for program, fb, samplers, mode in (
             ("ao_mask", mask_fb, depth, "MARK"),
-            ("ao", search_fb, depth + (("gbuffer_normal", gbuffer.normal),), "MASKED"),
+            ("ao", search_fb, depth + (("gbuffer_surface_target", gbuffer.surface),), "MASKED"),
             ("ao_blur_rows", rows_fb, (("ao_half", sums),), "MASKED"),
             ("ao_blur", blurred_fb, (("ao_half", rows),), "MASKED")):
         targets.fullscreen_pass(program, fb, half_size[0], half_size[1], samplers,

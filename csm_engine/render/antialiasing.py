@@ -16,7 +16,7 @@ from typing import NamedTuple
 from ..core.antialiasing import jittered, sample_offsets
 from . import shaders
 from .overlays import draw_frozen_cascades, draw_overlays
-from .readback import read_target
+from .readback import read_target, unpack_normals
 
 
 class Antialiased(NamedTuple):
@@ -76,7 +76,8 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, reque
     timings = dict(pipeline.timings)
     if request is not None and "Normal" in request.names and not use_fxaa:
         # Like Depth and Position, the Normal pass is the unjittered sample's.
-        pipeline.first_sample_normals = read_target(pipeline.gbuffer_fb, 1, width, height, 4)
+        pipeline.first_sample_normals = read_target(
+            unpack_normals(targets, pipeline.gbuffer), 0, width, height, 4)
     color_fb = targets.framebuffer("final_color_only", colors=(color,))
     t = time.perf_counter()
     if use_fxaa:

@@ -1,8 +1,9 @@
 """The G-buffer pass: what the camera sees, per pixel, for the lighting pass to shade.
 
-Owns the G-buffer's targets (``GBuffer``): albedo+specular, normal+roughness, view depth
-(0 = background), the triangle's own normal+the object's Shadow Terminator Geometry Offset
-(facet), emission+metallic, coat, depth and, for Cryptomatte passes only, each pixel's
+Owns the G-buffer's targets (``GBuffer``): two packed ones (``gbuffer_layout.glsl``):
+base colour, specular, shading normal and the triangle's own normal (facet) in one, view
+depth (0 = background), roughness and the object's Shadow Terminator Geometry Offset in the
+other; then emission+metallic, coat, depth and, for Cryptomatte passes only, each pixel's
 object, material and asset IDs (render/passes.py); materials are one uniform block each
 (core/material_layout.py). World positions are rebuilt from view depth where needed
 (``core.camera.world_positions``). Also owns ``GBufferContents``: what a G-buffer drawn now
@@ -29,11 +30,9 @@ _GBUFFER_FRAME_FIELDS = ("clip_from_world", "camera_position", "camera_forward",
 
 
 class GBuffer(NamedTuple):
-    albedo: object
-    normal: object
-    view_depth: object
+    surface: object         # base colour, specular, normals (gbuffer_layout.glsl)
+    view_depth: object      # view depth, roughness, terminator offset (likewise)
     emission: object
-    facet: object
     depth: object
     framebuffer: object
     coat: object = None
@@ -61,28 +60,23 @@ def programs_key():
 
 
 def draw_gbuffer(targets, snap, cache, lists, instances, frame_ubo, frame_data, width,
-                 height, ids=None, precise_normals=False):
+                 height, ids=None):
     """Draw the camera's view of ``lists`` (``DrawLists``) at ``instances``' matrices
     (``InstanceArrays``) into the G-buffer targets, near to far, with the frame block
     ``frame_ubo`` (``frame_data`` as numpy). Keeps the targets as they are when they hold
     what it would draw (the frame cache's ``gbuffer``). ``ids`` (``passes.DrawIds``): also
     write the Cryptomatte IDs, with the CRYPTOMATTE programs into one more target (such a
-    G-buffer is always drawn, never kept). ``precise_normals``: a float32 normal target (the
-Normal pass is read from it) instead of half floats. Returns (``GBuffer``, whether it was
-kept)."""
-    albedo = targets.texture("albedo", (width, height), 'RGBA16F')
-    normal = targets.texture("normal", (width, height),
-                             'RGBA32F' if precise_normals else 'RGBA16F')
-    view_depth = targets.texture("view_depth", (width, height), 'R32F')
+    G-buffer is always drawn, never kept). Returns (``GBuffer``, whether it was kept)."""
+    surface = targets.texture("surface", (width, height), 'RGBA32F')
+    view_depth = targets.texture("view_depth", (width, height), 'RG32F')
     depth = targets.gbuffer_depth(width, height)
     emission = targets.texture("emission", (width, height), 'RGBA16F')
-    facet = targets.texture("facet", (width, height), 'RGBA16F')
     coat = targets.texture("coat", (width, height), 'RGBA16F')
     # Emission and metallic have a target only in frames that draw some, and the coat one
     # only in frames with a coated material (which write emission's too: the outputs are
-    # positional): without one each fragment writes a sixth less (llvmpipe: ~15 % of the
-    # G-buffer), and the lighting pass reads a texture kept at zero.
-    colors = (albedo, normal, view_depth, facet)
+    # positional): without one each fragment writes one target less (llvmpipe pays per
+    # target), and the lighting pass reads a texture kept at zero.
+    colors = (surface, view_depth)
     if lists.writes_emission:
         colors += (emission, coat) if lists.writes_coat else (emission,)
     _keep_zero(targets, "zeroed_emission", emission, lists.writes_emission)
@@ -93,8 +87,7 @@ kept)."""
         # Drawn by a second draw into the coat's slot (Blender's framebuffers take six
         # colour targets): the first slots get the same values again.
         id_target = targets.texture("cryptomatte_ids", (width, height), 'RGBA32F')
-    gbuffer = GBuffer(albedo, normal, view_depth, emission, facet, depth, gbuffer_fb, coat,
-                      id_target)
+    gbuffer = GBuffer(surface, view_depth, emission, depth, gbuffer_fb, coat, id_target)
     # Near to far, so the early depth test skips the shading of hidden fragments.
     order = np.asarray(front_to_back(snap, instances.bounds_lo_hi), dtype=np.int64)
     order = order[np.fromiter((i.visible_camera for i in snap.instances), dtype=bool,
@@ -104,7 +97,7 @@ kept)."""
     terminator_offsets = np.fromiter((i.terminator_offset for i in snap.instances),
                                      dtype=np.float64, count=len(snap.instances))
     frame_cache = targets.frame_cache
-    drawn_into = (albedo, normal, view_depth, emission, depth, facet, coat)
+    drawn_into = (surface, view_depth, emission, depth, coat)
     contents = gbuffer_contents(targets, snap, cache, lists, order,
                                 instances.world_from_objects, terminator_offsets, frame_data)
     if ids is not None:
@@ -128,8 +121,7 @@ kept)."""
         with clear_fb.bind():
             targets.call(clear_fb.clear, color=(0.0, 0.0, 0.0, 0.0))
         ids_fb = targets.framebuffer("gbuffer_ids", depth=depth,
-                                     colors=(albedo, normal, view_depth, facet, emission,
-                                             id_target))
+                                     colors=(surface, view_depth, emission, id_target))
         _draw(targets, lists, instances, order, terminator_offsets, frame_ubo, ids_fb,
               width, height, ids, instancing_allowed=False, clear=False, solids=solids)
     if contents is not None and targets.records:

@@ -77,8 +77,7 @@ def draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlus
             gpu.state.depth_test_set('NONE')
         lighting.bind()
         lighting.uniform_block("frame", frame_ubo)
-        lighting.uniform_sampler("gbuffer_albedo", gbuffer.albedo)
-        lighting.uniform_sampler("gbuffer_normal", gbuffer.normal)
+        lighting.uniform_sampler("gbuffer_surface_target", gbuffer.surface)
         lighting.uniform_sampler("gbuffer_depth", gbuffer.view_depth)
         lighting.uniform_sampler("shadow_atlas", atlas.depth)
         lighting.uniform_sampler("shadow_partial", atlas.partial)
@@ -86,7 +85,6 @@ def draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlus
                                  if atlas.nearest_blocks is None else atlas.nearest_blocks)
         lighting.uniform_sampler("ambient_occlusion", ao_texture)
         lighting.uniform_sampler("gbuffer_emission", gbuffer.emission)
-        lighting.uniform_sampler("gbuffer_facet", gbuffer.facet)
         lighting.uniform_sampler("shadow_volume_count",
                                  targets.white() if volume_count is None else volume_count)
         lighting.uniform_sampler("bsdf_lut", targets.bsdf_lut())

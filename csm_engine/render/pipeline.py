@@ -38,7 +38,7 @@ from .blocker_search import nearest_blocks
 from .draw_lists import HeldDrawLists
 from .gbuffer import draw_gbuffer
 from .lighting import draw_lighting
-from .readback import read_images, read_target
+from .readback import read_images, read_target, unpack_normals
 # RenderTargetError: what the engine tells the user when a target cannot be allocated.
 from .resources import RenderTargetError, Targets  # noqa: F401
 from .result import PassCounts, RenderResult
@@ -66,7 +66,7 @@ class Pipeline:
         self.timings = {}
         self.last_frame = PassCounts()  # what the last ``draw`` drew and kept
         self.last_plan = None           # the shadow plan the last ``draw`` used
-        self.gbuffer_fb = None          # kept after draw() for the final render's read-back
+        self.gbuffer = None             # kept after draw() for the final render's read-back
         # Cryptomatte: each drawn sample's ID image, and the materials named in them.
         self.cryptomatte_samples = render_passes.CryptomatteSamples()
         self.cryptomatte_materials = set()
@@ -188,8 +188,9 @@ class Pipeline:
         def gbuffer_pass(t):
             gbuffer, kept = draw_gbuffer(
                 targets, snap, cache, lists, instances, frame_ubo, frame_data, width, height,
-                ids, precise_normals=passes is not None and "Normal" in passes.names)
-            return gbuffer, kept, self._sync(gbuffer.framebuffer, "gbuffer", t)
+                ids)
+            # Its colour targets hold integers (gbuffer_layout.glsl): the depth is read.
+            return gbuffer, kept, self._sync(gbuffer.framebuffer, "gbuffer", t, True)
 
         t = time.perf_counter()
         if fit_to_visible:
@@ -197,7 +198,7 @@ class Pipeline:
             # view depth, then cascades fitted to that range, then their shadow maps.
             gbuffer, gbuffer_kept, t = gbuffer_pass(t)
             blocks = self.visible_depth.blocks(targets, gbuffer, gbuffer_kept, width, height)
-            t = self._sync(gbuffer.framebuffer, "depth_range", t)
+            t = self._sync(gbuffer.framebuffer, "depth_range", t, True)
             plan = self._plan(snap, bounds, blocks)
             self._warn(plan.warnings)
             atlas = allocate_atlas(targets, plan, self.warnings)
@@ -236,7 +237,7 @@ class Pipeline:
                 targets.records:
             self.shadow_error = shadow_error(target_fb, width, height)
 
-        self.gbuffer_fb = gbuffer.framebuffer
+        self.gbuffer = gbuffer
         self.volume_count = volume_count
         self.last_frame = _counts(targets, tiles, gbuffer_kept, ambient_occlusion)
         self.last_plan = plan
@@ -293,7 +294,8 @@ class Pipeline:
         t = time.perf_counter()
         if lighting_passes:
             reads = dict(reads, **{name: 4 for name in render_passes.LIGHTING_PASS_TARGETS})
-        images = read_images(snap, reads, final_fb, combined_fb, self.gbuffer_fb,
+        normals_fb = unpack_normals(targets, self.gbuffer) if "normal" in reads else None
+        images = read_images(snap, reads, final_fb, combined_fb, normals_fb,
                              with_positions, memory)
         if self.first_sample_normals is not None:
             images["normal"] = self.first_sample_normals

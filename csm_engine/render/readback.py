@@ -14,7 +14,7 @@ from .passes import LIGHTING_PASS_TARGETS
 # What each image is read from: (target, colour slot); the G-buffer's normal target is
 # the pipeline's own, the other two the final target's ("combined" from wherever the
 # anti-aliasing left it).
-READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("gbuffer", 1)}
+READS = {"combined": ("final", 0), "aux": ("final", 1), "normal": ("normals", 0)}
 # The light and colour passes' targets, in the final target's colour slots 2.. when a
 # render asks for them (render/passes.py).
 READS.update({name: ("final", 2 + slot) for slot, name in enumerate(LIGHTING_PASS_TARGETS)})
@@ -59,7 +59,7 @@ class ReadbackMemory:
         self._blocks = {}
 
 
-def read_images(snap, reads, final_fb, combined_fb, gbuffer_fb, with_positions=False,
+def read_images(snap, reads, final_fb, combined_fb, normals_fb, with_positions=False,
                 memory=None):
     """``reads``: image name ("combined", "aux", "normal", a ``LIGHTING_PASS_TARGETS``
     name) -> channels (1..4, from the first). Returns name -> (H, W, channels) float32,
@@ -71,7 +71,7 @@ def read_images(snap, reads, final_fb, combined_fb, gbuffer_fb, with_positions=F
     out = {}
     for name, channels in reads.items():
         source, slot = READS[name]
-        fb = {"final": final_fb, "gbuffer": gbuffer_fb}[source]
+        fb = {"final": final_fb, "normals": normals_fb}[source]
         if name == "combined":
             fb, slot = combined_fb, 0
         count = width * height * channels
@@ -92,6 +92,21 @@ def read_images(snap, reads, final_fb, combined_fb, gbuffer_fb, with_positions=F
         position[..., 3] = covered
         out["position"] = position
     return out
+
+
+def unpack_normals(targets, gbuffer):
+    """The world normals of ``gbuffer`` (``gbuffer.GBuffer``, octahedral in its surface
+    target, ``gbuffer_layout.glsl``) unpacked on the GPU into a float target (xyz, 0 on
+    the background); returns its framebuffer, whose colour slot 0 ``read_images`` reads
+    as "normal"."""
+    # Unpacked where the packing is written (gbuffer_layout.glsl), not again in numpy.
+    width, height = gbuffer.surface.width, gbuffer.surface.height
+    texture = targets.texture("normals_unpacked", (width, height), 'RGBA32F')
+    fb = targets.framebuffer("normals_unpacked", colors=(texture,))
+    targets.fullscreen_pass("gbuffer_normals", fb, width, height,
+                            (("gbuffer_surface_target", gbuffer.surface),
+                             ("gbuffer_depth", gbuffer.view_depth)))
+    return fb
 
 
 def read_target(framebuffer, slot, width, height, channels):

@@ -14,7 +14,7 @@ import numpy as np
 from . import shaders
 
 _BYTES_PER_TEXEL = {'RGBA32F': 16, 'RGBA16F': 8, 'R32F': 4, 'DEPTH_COMPONENT32F': 4,
-                    'RGBA8': 4, 'R8': 1}
+                    'RGBA8': 4, 'R8': 1, 'RG32F': 8}
 
 
 class RenderTargetError(Exception):

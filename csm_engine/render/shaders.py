@@ -54,8 +54,9 @@ PROGRAMS = {
                   ("FLOAT_2D", "emission_texture"), ("FLOAT_2D", "surface_texture")),
         frame=True,
         material=True,      # MaterialData (core/material_layout.py) as "material"
-        outputs=(("VEC4", "out_albedo"), ("VEC4", "out_normal"), ("FLOAT", "out_depth"),
-                 ("VEC4", "out_facet"), ("VEC4", "out_emission"), ("VEC4", "out_coat")),
+        # The packed targets (gbuffer_layout.glsl), then those only some frames have.
+        outputs=(("VEC4", "out_surface"), ("VEC2", "out_depth"), ("VEC4", "out_emission"),
+                 ("VEC4", "out_coat")),
     ),
     "shadow": dict(
         vertex="shadow_vert.glsl", fragment="shadow_frag.glsl",
@@ -71,10 +72,9 @@ PROGRAMS = {
         inputs=(("pos", "VEC2"),),
         interface=(("screen_uv", "VEC2", "smooth"),),
         push=(),
-        samplers=(("FLOAT_2D", "gbuffer_albedo"), ("FLOAT_2D", "gbuffer_normal"),
-                  ("FLOAT_2D", "gbuffer_depth"), ("FLOAT_2D", "shadow_atlas"),
-                  ("FLOAT_2D", "shadow_partial"), ("FLOAT_2D", "gbuffer_emission"),
-                  ("FLOAT_2D", "gbuffer_facet")),
+        samplers=(("FLOAT_2D", "gbuffer_surface_target"), ("FLOAT_2D", "gbuffer_depth"),
+                  ("FLOAT_2D", "shadow_atlas"), ("FLOAT_2D", "shadow_partial"),
+                  ("FLOAT_2D", "gbuffer_emission")),
         frame=True,
         outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
     ),
@@ -135,6 +135,12 @@ PROGRAMS["fxaa_mark"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_MARK", "1"),),
                              samplers=(("FLOAT_2D", "luma"),), outputs=())
 PROGRAMS["fxaa_blend"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_BLEND", "1"),),
                               samplers=(("FLOAT_2D", "source"), ("FLOAT_2D", "luma")))
+
+# The G-buffer's normals unpacked for a read-back (the Normal pass).
+PROGRAMS["gbuffer_normals"] = dict(
+    PROGRAMS["depth_range"], fragment="gbuffer_normals_frag.glsl", on_demand=True,
+    samplers=(("FLOAT_2D", "gbuffer_surface_target"), ("FLOAT_2D", "gbuffer_depth")),
+    outputs=(("VEC4", "out_normal"),))
 
 # NOTE: a fragment shader that may ``discard`` turns off the rasterizer's early depth test,
 # so every hidden fragment runs the whole shader (llvmpipe: about half the G-buffer cost).
@@ -198,7 +204,7 @@ _AO_COMMON = dict(vertex="fullscreen_vert.glsl", fragment="ao_frag.glsl",
 PROGRAMS["ao_mask"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),),
                            outputs=(), depth_write="ANY", defines=(("AO_MASK", "1"),))
 PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
-                                            ("FLOAT_2D", "gbuffer_normal")),
+                                            ("FLOAT_2D", "gbuffer_surface_target")),
                       outputs=(("VEC4", "out_ao_sums"),))
 PROGRAMS["ao_blur_rows"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "ao_half"),),
                                 outputs=(("VEC4", "out_ao_sums"),),

@@ -63,7 +63,8 @@ def reduce_min_max(targets, name, source, size, steps, source_is_view_depth=Fals
     """``steps`` 4x4 min/max reductions of ``source`` (``size`` texels) on the GPU
     (``depth_range_frag.glsl``): per output texel the nearest (R) and farthest (G) value of
     the 4^steps x 4^steps block it covers. ``source_is_view_depth``: the G-buffer's view
-    depth, whose 0 (background) is left out. Returns the last RGBA32F target and its
+    depth target (its first channel, ``gbuffer_layout.glsl``), whose 0 (background) is
+    left out. Returns the last RGBA32F target and its
     framebuffer (textures named ``<name>_<step>``). The view depth's step is its own
     program (``depth_range_view``): llvmpipe would run both kinds of step's code for
     every pixel if a uniform chose between them."""

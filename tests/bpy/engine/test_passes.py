@@ -189,9 +189,9 @@ def test_geometry_passes_match_eevee(empty_scene, tmp_path, pass_name, setting):
         # EEVEE's Position agrees to about half-float steps (measured: mean 1.2e-4).
         tolerance = 1e-4 if pass_name == "Depth" else 1e-3
     else:
-        # Normals: CSM's come from a float32 G-buffer target when the pass is on, but
-        # Blender's own draws (EEVEE's) take vertex normals packed into 10-bit integers:
-        # measured max 1.6e-3, mean 1.1e-4 on the smooth sphere. Mist is 0..1.
+        # Normals: CSM's come from the G-buffer's octahedral 2 x 16-bit ones (within
+        # ~6e-5), but Blender's own draws (EEVEE's) take vertex normals packed into 10-bit
+        # integers: measured max 1.6e-3, mean 1.1e-4 on the smooth sphere. Mist is 0..1.
         error = np.abs(ours - theirs)[covered].max(axis=-1)
         tolerance = 2e-3 if pass_name == "Normal" else 1e-3
     print(f"{pass_name}: CSM - EEVEE over {int(covered.sum())} pixels: max {error.max():.2e}, "
