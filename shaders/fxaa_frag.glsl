@@ -10,11 +10,11 @@
  *
  * Three programs come from this file. Without a define, one pass does it all (the
  * viewport). A final render runs two (render/antialiasing.py), with the same result, on
- * the lumas the lighting pass wrote into a target of their own (fxaa_luma.glsl):
- * FXAA_MARK copies every pixel and writes depth 0 where it is on an edge (1 elsewhere);
- * FXAA_BLEND then runs under a depth test that passes only there, overwriting the copy,
- * and reads the lumas with textureGather, four at a time (cheaper than four
- * texelFetch()es on llvmpipe).
+ * what the lighting pass handed it (fxaa_luma.glsl: a copy of its colour in the final
+ * target, and the lumas in a target of their own): FXAA_MARK writes depth 0 where a pixel
+ * is on an edge (1 elsewhere); FXAA_BLEND then runs under a depth test that passes only
+ * there, and reads the lumas with textureGather, four at a time (cheaper than four
+ * texelFetch()es on llvmpipe), overwriting the copy on edges.
  * NOTE: llvmpipe runs both sides of an `if` for every pixel of a block with one edge pixel,
  * so the one-pass program pays the corners and the edge walk's first step everywhere;
  * pixel blocks that fail an early depth test are not shaded at all. */
@@ -89,7 +89,6 @@ void main()
   bool flat_pixel = is_flat(lower_left.y, lower_left.z, upper_right.x, lower_left.x,
                             upper_right.z, range);
   gl_FragDepth = flat_pixel ? 1.0 : 0.0;
-  out_color = texelFetch(source, p, 0);
 }
 
 #else

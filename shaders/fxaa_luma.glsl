@@ -1,5 +1,5 @@
-/* The luma FXAA finds edges by (fxaa_frag.glsl), which the lighting pass hands a final
- * render's FXAA (render/antialiasing.py) for each pixel it writes.
+/* The luma FXAA finds edges by (fxaa_frag.glsl), and what the lighting pass hands a final
+ * render's FXAA (render/antialiasing.py): a copy of each pixel's colour and its luma.
  * Luma is taken after a square root (close to the display's sRGB curve), so FXAA's
  * thresholds mean what they mean on screen. */
 
@@ -9,12 +9,14 @@ float fxaa_luma_of(vec4 c)
 }
 
 #ifdef FXAA_INPUTS
-/* Hands FXAA the luma of the colour this pixel's out_color holds. NOTE: written by the
- * lighting and background programs themselves, so a final render's FXAA needs no pass of
- * its own that reads every pixel only to take its luma; a frame without FXAA leaves the
- * slot unattached. */
+/* Hands FXAA the colour this pixel's out_color holds: a copy (the target FXAA's edge
+ * blend then overwrites only on edges) and its luma. NOTE: written by the lighting and
+ * background programs themselves, so a final render's FXAA needs no pass that reads every
+ * pixel back only to copy it and take its luma; a frame without FXAA leaves these slots
+ * unattached, and they cost nothing. */
 void write_fxaa_inputs()
 {
+  out_fxaa_color = out_color;
   out_fxaa_luma = fxaa_luma_of(out_color);
 }
 #else

@@ -8,7 +8,7 @@
  * for code it skips, so a program holds only what its scene uses. Each also has a PASSES
  * twin, for final renders with render passes on: it writes the light and colour passes
  * (render/passes.py lists the targets) besides Combined. Every program also hands a final
- * render's FXAA its colour's luma (fxaa_luma.glsl). */
+ * render's FXAA a copy of its colour and the colour's luma (fxaa_luma.glsl). */
 #include "surface.glsl"
 #include "brdf.glsl"
 #include "lights.glsl"
