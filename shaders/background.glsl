@@ -1,6 +1,5 @@
 /* What a pixel without a surface holds, in the lighting pass and in the background pass
  * that spares the lighting pass those pixels (render/lighting.py). */
-#include "fxaa_luma.glsl"
 
 /* The render passes there (PASSES programs only): all zero, AO open; Environment is
  * Combined there (render/passes.py). */
@@ -15,12 +14,10 @@ void write_no_surface_passes()
 }
 
 /* The World colour (alpha 0 with Film > Transparent), the auxiliary values of no surface
- * (sun visibility 1, no cascade, a far view depth, no coverage), the passes' zeros and
- * FXAA's inputs. */
+ * (sun visibility 1, no cascade, a far view depth, no coverage) and the passes' zeros. */
 void write_background()
 {
   out_color = vec4(frame.background_color, frame.background_alpha);
   out_aux = vec4(1.0, -1.0, 1e10, 0.0);
   write_no_surface_passes();
-  write_fxaa_inputs();
 }

@@ -6,19 +6,18 @@
  * NOTE: textures made from Python sample with nearest filtering (the gpu module cannot set
  * filtering), so every "half-texel" fetch of the original is written as the mean of two
  * texelFetch()es, and the final blend mixes the two texels by hand.
- * Input is scene-linear colour; luma as fxaa_luma.glsl takes it.
+ * Input is scene-linear colour; luma is taken after a square root (close to the display's
+ * sRGB curve), so the thresholds mean what they mean on screen.
  *
- * Three programs come from this file. Without a define, one pass does it all (the
- * viewport). A final render runs two (render/antialiasing.py), with the same result, on
- * what the lighting pass handed it (fxaa_luma.glsl: a copy of its colour in the final
- * target, and the lumas in a target of their own): FXAA_MARK writes depth 0 where a pixel
- * is on an edge (1 elsewhere); FXAA_BLEND then runs under a depth test that passes only
- * there, and reads the lumas with textureGather, four at a time (cheaper than four
- * texelFetch()es on llvmpipe), overwriting the copy on edges.
+ * Four programs come from this file. Without a define, one pass does it all (the
+ * viewport). A final render runs three (render/antialiasing.py), with the same result:
+ * FXAA_LUMA copies every pixel and writes its luma to a target of its own; FXAA_MARK
+ * writes depth 0 where a pixel is on an edge (1 elsewhere); FXAA_BLEND then runs under a
+ * depth test that passes only there, and reads the lumas with textureGather, four at a
+ * time (cheaper than four texelFetch()es on llvmpipe).
  * NOTE: llvmpipe runs both sides of an `if` for every pixel of a block with one edge pixel,
  * so the one-pass program pays the corners and the edge walk's first step everywhere;
  * pixel blocks that fail an early depth test are not shaded at all. */
-#include "fxaa_luma.glsl"
 
 const float EDGE_THRESHOLD_MIN = 0.0312;
 const float EDGE_THRESHOLD_MAX = 0.125;
@@ -37,6 +36,11 @@ vec4 color_at(ivec2 p)
   return texelFetch(source, clamp(p, ivec2(0), source_size - 1), 0);
 }
 #endif
+
+float luma_of(vec4 c)
+{
+  return sqrt(clamp(dot(c.rgb, vec3(0.2126, 0.7152, 0.0722)), 0.0, 1.0));
+}
 
 #if defined(FXAA_MARK) || defined(FXAA_BLEND)
 float luma_at(ivec2 p)
@@ -60,7 +64,7 @@ float luma_pair(ivec2 q, ivec2 across, bool horizontal)
 #else
 float luma_at(ivec2 p)
 {
-  return fxaa_luma_of(color_at(p));
+  return luma_of(color_at(p));
 }
 
 float luma_pair(ivec2 q, ivec2 across, bool horizontal)
@@ -78,7 +82,15 @@ bool is_flat(float center, float down, float up, float left, float right, out fl
   return range < max(EDGE_THRESHOLD_MIN, luma_max * EDGE_THRESHOLD_MAX);
 }
 
-#if defined(FXAA_MARK)
+#if defined(FXAA_LUMA)
+void main()
+{
+  vec4 center_color = texelFetch(source, ivec2(gl_FragCoord.xy), 0);
+  out_color = center_color;
+  out_luma = luma_of(center_color);
+}
+
+#elif defined(FXAA_MARK)
 void main()
 {
   source_size = textureSize(luma, 0);
@@ -108,7 +120,7 @@ void main()
   float down_left = lower_left.w;
   float up_right = upper_right.y;
 #  else
-  float center = fxaa_luma_of(center_color);
+  float center = luma_of(center_color);
   float down = luma_at(p + ivec2(0, -1));
   float up = luma_at(p + ivec2(0, 1));
   float left = luma_at(p + ivec2(-1, 0));

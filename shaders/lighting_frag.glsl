@@ -7,8 +7,7 @@
  * (SPOT_LIGHTS) and the debug views (WITH_DEBUG_VIEWS) (render/shaders.py): llvmpipe pays
  * for code it skips, so a program holds only what its scene uses. Each also has a PASSES
  * twin, for final renders with render passes on: it writes the light and colour passes
- * (render/passes.py lists the targets) besides Combined. Every program also hands a final
- * render's FXAA a copy of its colour and the colour's luma (fxaa_luma.glsl). */
+ * (render/passes.py lists the targets) besides Combined. */
 #include "surface.glsl"
 #include "brdf.glsl"
 #include "lights.glsl"
@@ -254,7 +253,6 @@ void main()
     out_color = vec4(map_color, 1.0);
     out_aux = vec4(1.0, -1.0, 0.0, 1.0);
     write_no_surface_passes();
-    write_fxaa_inputs();
     return;
   }
 #endif
@@ -266,7 +264,6 @@ void main()
     if (frame.debug_view == DEBUG_SHADOW_ERROR) {
       /* Black, so the view's surface pixels can be counted (render/shadow_volumes.py). */
       out_color = vec4(0.0, 0.0, 0.0, 1.0);
-      write_fxaa_inputs();
     }
 #endif
     return;
@@ -296,5 +293,4 @@ void main()
   out_color = vec4(color, 1.0);
   out_aux = vec4(sun_visibility, cascade, surface.view_depth, 1.0);
   write_surface_passes(surface, ambient_visibility);
-  write_fxaa_inputs();
 }

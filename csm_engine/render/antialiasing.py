@@ -5,9 +5,8 @@ Owns ``draw_viewport_fxaa`` and ``draw_antialiased``, which drive ``Pipeline.dra
 each sample with a snapshot of their own (the jittered camera and sample index; the
 caller's snapshot is never changed), and the frozen-cascade overlays after anti-aliasing,
 so 1-pixel lines stay crisp. Sample offsets and weights come from core/antialiasing.py.
-A final render's FXAA runs in two passes (``_draw_final_fxaa``) on the copy and lumas the
-lighting pass wrote, so that only pixel blocks with an edge run the edge walk; the
-viewport's in one, into Blender's framebuffer.
+A final render's FXAA runs in three passes (``_draw_final_fxaa``) so that only pixel blocks
+with an edge run the edge walk; the viewport's in one, into Blender's framebuffer.
 """
 
 import dataclasses
@@ -65,14 +64,8 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, reque
     width, height = snap.camera.width, snap.camera.height
     lit = targets.texture("lit_final", (width, height), 'RGBA32F')
     depth = targets.gbuffer_depth(width, height)
-    # With FXAA the lighting pass also writes its colour into ``color`` and its luma into a
-    # target of its own (the slots after the passes', shaders.FXAA_INPUT_OUTPUTS): FXAA
-    # then only overwrites the edges, with no pass that copies every pixel.
-    fxaa_inputs = (color, targets.texture("fxaa_luma", (width, height), 'R32F')) \
-        if use_fxaa else ()
-    first_fb = targets.framebuffer(
-        "lit_first" + ("_passes" if pass_textures else "") + ("_fxaa" if use_fxaa else ""),
-        depth=depth, colors=(lit, aux) + tuple(pass_textures) + fxaa_inputs)
+    first_fb = targets.framebuffer("lit_first_passes" if pass_textures else "lit_first",
+                                   depth=depth, colors=(lit, aux) + tuple(pass_textures))
     offsets, weights = sample_offsets(samples, snap.pixel_filter_width) if not use_fxaa \
         else (None, (1.0,))
     started = time.perf_counter()
@@ -87,7 +80,7 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, reque
     color_fb = targets.framebuffer("final_color_only", colors=(color,))
     t = time.perf_counter()
     if use_fxaa:
-        _draw_final_fxaa(targets, lit, fxaa_inputs[1], color, width, height)
+        _draw_final_fxaa(targets, lit, color, width, height)
         draw_overlays(snap, plan, color_fb, width, height)
         timings["fxaa"] = time.perf_counter() - t
         timings["total"] = timings.get("total", 0.0) + timings["fxaa"]
@@ -133,13 +126,15 @@ def draw_antialiased(pipeline, snap, cache, samples, use_fxaa, color, aux, reque
     return Antialiased(plan, mean_fb, timings, passes)
 
 
-def _draw_final_fxaa(targets, lit, luma, color, width, height):
-    """FXAA from ``lit`` into ``color``, which the lighting pass wrote a copy of ``lit``
-    into, with its lumas in ``luma`` (fxaa_luma.glsl), in two passes (fxaa_frag.glsl): the
-    mark, depth 0 on edge pixels (depth only); and the blend, the edge walk under a depth
-    test, so llvmpipe shades only the pixel blocks that hold an edge pixel and overwrites
-    only edge pixels of the copy. The same pixels as the one-pass program."""
+def _draw_final_fxaa(targets, lit, color, width, height):
+    """FXAA from ``lit`` into ``color`` in three passes (fxaa_frag.glsl): a copy of every
+    pixel with its luma into a target of its own; the mark, depth 0 on edge pixels (depth
+    only); and the blend, the edge walk under a depth test, so llvmpipe shades only the
+    pixel blocks that hold an edge pixel. The same pixels as the one-pass program."""
+    luma = targets.texture("fxaa_luma", (width, height), 'R32F')
     mask = targets.texture("fxaa_mask", (width, height), 'DEPTH_COMPONENT32F')
+    targets.fullscreen_pass("fxaa_luma", targets.framebuffer("fxaa_luma", colors=(color, luma)),
+                            width, height, (("source", lit),))
     targets.fullscreen_pass("fxaa_mark", targets.framebuffer("fxaa_mark", depth=mask),
                             width, height, (("luma", luma),), depth="MARK")
     targets.fullscreen_pass("fxaa_blend",

@@ -46,8 +46,6 @@ def draw_lighting(targets, snap, plan, frame_ubo, gbuffer, atlas, ambient_occlus
     has the G-buffer's depth attached. ``overlays``: then draw ``plan``'s frozen
     cascades. ``passes``: draw with the PASSES programs, which also write the light and
     colour passes into ``target_fb``'s colour slots 2.. (``passes.LIGHTING_PASS_TARGETS``).
-    Every program writes FXAA's inputs (a copy of the colour, its luma) into the two
-    slots after those (``antialiasing``; unattached slots drop them).
     ``volume_count``: the shadow-volume pass's count (``shadow_volumes``), for Filter Exact
     and the Shadow error view. ``emission``, ``coat``: the G-buffer's emission and
     metallic target, its coat target, hold what some material wrote (else zeros, which the

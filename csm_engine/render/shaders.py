@@ -125,9 +125,10 @@ PROGRAMS = {
     ),
 }
 
-# A final render's FXAA in two passes (fxaa_frag.glsl, render/antialiasing.py) on the copy
-# and lumas the lighting pass wrote (FXAA_INPUTS, below): the edge mark (depth only); the
-# edge walk where the mark's depth passes.
+# A final render's FXAA in three passes (fxaa_frag.glsl, render/antialiasing.py): a copy
+# with the lumas; the edge mark (depth only); the edge walk where the mark's depth passes.
+PROGRAMS["fxaa_luma"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_LUMA", "1"),),
+                             outputs=(("VEC4", "out_color"), ("FLOAT", "out_luma")))
 PROGRAMS["fxaa_mark"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_MARK", "1"),),
                              samplers=(("FLOAT_2D", "luma"),), outputs=())
 PROGRAMS["fxaa_blend"] = dict(PROGRAMS["fxaa"], defines=(("FXAA_BLEND", "1"),),
@@ -282,14 +283,6 @@ for _name in [name for name in PROGRAMS if name.startswith(("lighting", "backgro
     PROGRAMS[_name + "_passes"] = dict(
         _spec, on_demand=True, outputs=_spec["outputs"] + PASS_OUTPUTS,
         defines=_spec.get("defines", ()) + (("PASSES", "1"),))
-# Every lighting and background program also writes what a final render's FXAA reads
-# (fxaa_luma.glsl, FXAA_INPUTS): a copy of its colour and the colour's luma, in the two
-# colour slots after its others (render/antialiasing.py attaches them only for FXAA).
-FXAA_INPUT_OUTPUTS = (("VEC4", "out_fxaa_color"), ("FLOAT", "out_fxaa_luma"))
-for _name in [name for name in PROGRAMS if name.startswith(("lighting", "background"))]:
-    _spec = PROGRAMS[_name]
-    PROGRAMS[_name] = dict(_spec, outputs=_spec["outputs"] + FXAA_INPUT_OUTPUTS,
-                           defines=_spec.get("defines", ()) + (("FXAA_INPUTS", "1"),))
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
 
