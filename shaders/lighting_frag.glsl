@@ -114,8 +114,15 @@ void add_sun(inout Surface s, inout vec3 color, out float visibility, out float 
   for (int k = 0; ; k++) {
     ShadowTileData tile = frame.shadow_tiles[max(k == 0 ? sun_tile : second_tile, 0)];
     /* Sun cascades are orthographic: said here as a constant, the compiler drops the
-     * perspective code from the lookup (llvmpipe would run it for every pixel). */
+     * perspective code from the lookup (llvmpipe would run it for every pixel). So is
+     * their projection's last row, (0, 0, 0, 1) (core/frame_block.py: products of
+     * matrices that end in it), and the lookup's w is 1. NOTE: llvmpipe reads the fields
+     * of a tile picked per pixel one pixel at a time: each constant is a read less. */
     tile.is_perspective = 0;
+    tile.shadow_from_world[0][3] = 0.0;
+    tile.shadow_from_world[1][3] = 0.0;
+    tile.shadow_from_world[2][3] = 0.0;
+    tile.shadow_from_world[3][3] = 1.0;
     float vis = shadow_tile_visibility(tile, p_sun, s.shadow_normal, shadow_n_dot_sun,
                                        frame.sun_tan_half_angle);
     if (k < sun_lookups) {
