@@ -164,7 +164,11 @@ void add_point_light_range(Surface s, int first, int end, const bool shadowed,
       if (shadowed) {
         int tile = min(frame.point_shadow_tiles + 6 * i +
                        cube_face(s.position - light.position), MAX_SHADOW_TILES - 1);
-        vis = shadow_tile_visibility(frame.shadow_tiles[tile], s.position, s.shadow_normal,
+        ShadowTileData face = frame.shadow_tiles[tile];
+        /* Cube faces are perspective (core/shadow_plan.py): said as a constant, the
+         * compiler drops the orthographic code and its tile reads (see add_sun). */
+        face.is_perspective = 1;
+        vis = shadow_tile_visibility(face, s.position, s.shadow_normal,
                                      dot(s.shadow_normal, l), light.source_radius);
 #if SHADOW_FILTER == FILTER_EXACT
         /* The first shadowed lights have counted volumes (shadow_volume_lookup.glsl). */
@@ -208,9 +212,12 @@ void add_spot_lights(Surface s, inout vec3 color)
     if (attenuation > 0.0 && i <= last) {
       float vis = 1.0;
       if (spot.shadow_tile >= 0) {
-        vis = shadow_tile_visibility(frame.shadow_tiles[spot.shadow_tile], s.position,
-                                     s.shadow_normal, dot(s.shadow_normal, l),
-                                     spot.source_radius);
+        ShadowTileData tile = frame.shadow_tiles[max(spot.shadow_tile, 0)];
+        /* A spot light's tile is perspective (core/shadow_plan.py): see
+         * add_point_light_range. */
+        tile.is_perspective = 1;
+        vis = shadow_tile_visibility(tile, s.position, s.shadow_normal,
+                                     dot(s.shadow_normal, l), spot.source_radius);
 #if SHADOW_FILTER == FILTER_EXACT
         int c = spot_volume_channel(shadowed_rank);
         if (c > 0) {
