@@ -114,8 +114,15 @@ void add_sun(inout Surface s, inout vec3 color, out float visibility, out float 
   for (int k = 0; ; k++) {
     ShadowTileData tile = frame.shadow_tiles[max(k == 0 ? sun_tile : second_tile, 0)];
     /* Sun cascades are orthographic: said here as a constant, the compiler drops the
-     * perspective code from the lookup (llvmpipe would run it for every pixel). */
+     * perspective code from the lookup (llvmpipe would run it for every pixel). So is
+     * their projection's last row, (0, 0, 0, 1) (core/frame_block.py: products of
+     * matrices that end in it), and the lookup's w is 1. NOTE: llvmpipe reads the fields
+     * of a tile picked per pixel one pixel at a time: each constant is a read less. */
     tile.is_perspective = 0;
+    tile.shadow_from_world[0][3] = 0.0;
+    tile.shadow_from_world[1][3] = 0.0;
+    tile.shadow_from_world[2][3] = 0.0;
+    tile.shadow_from_world[3][3] = 1.0;
     float vis = shadow_tile_visibility(tile, p_sun, s.shadow_normal, shadow_n_dot_sun,
                                        frame.sun_tan_half_angle);
     if (k < sun_lookups) {
@@ -157,7 +164,11 @@ void add_point_light_range(Surface s, int first, int end, const bool shadowed,
       if (shadowed) {
         int tile = min(frame.point_shadow_tiles + 6 * i +
                        cube_face(s.position - light.position), MAX_SHADOW_TILES - 1);
-        vis = shadow_tile_visibility(frame.shadow_tiles[tile], s.position, s.shadow_normal,
+        ShadowTileData face = frame.shadow_tiles[tile];
+        /* Cube faces are perspective (core/shadow_plan.py): said as a constant, the
+         * compiler drops the orthographic code and its tile reads (see add_sun). */
+        face.is_perspective = 1;
+        vis = shadow_tile_visibility(face, s.position, s.shadow_normal,
                                      dot(s.shadow_normal, l), light.source_radius);
 #if SHADOW_FILTER == FILTER_EXACT
         /* The first shadowed lights have counted volumes (shadow_volume_lookup.glsl). */
@@ -201,9 +212,12 @@ void add_spot_lights(Surface s, inout vec3 color)
     if (attenuation > 0.0 && i <= last) {
       float vis = 1.0;
       if (spot.shadow_tile >= 0) {
-        vis = shadow_tile_visibility(frame.shadow_tiles[spot.shadow_tile], s.position,
-                                     s.shadow_normal, dot(s.shadow_normal, l),
-                                     spot.source_radius);
+        ShadowTileData tile = frame.shadow_tiles[max(spot.shadow_tile, 0)];
+        /* A spot light's tile is perspective (core/shadow_plan.py): see
+         * add_point_light_range. */
+        tile.is_perspective = 1;
+        vis = shadow_tile_visibility(tile, s.position, s.shadow_normal,
+                                     dot(s.shadow_normal, l), spot.source_radius);
 #if SHADOW_FILTER == FILTER_EXACT
         int c = spot_volume_channel(shadowed_rank);
         if (c > 0) {

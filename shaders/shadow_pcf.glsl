@@ -1,6 +1,9 @@
 /* The PCF shadow filter (Shadow Filter: PCF): a grid of bilinearly weighted taps, or the
  * cross (5-tap) and nine-tap patterns, PCF Radius texels apart, then PCF Sharpen.
- * Used by shadow_lookup.glsl in the programs built with SHADOW_FILTER FILTER_PCF. */
+ * Used by shadow_lookup.glsl in the programs built with SHADOW_FILTER FILTER_PCF. The
+ * patterns and Radius 0's one hard tap are read only by programs built with
+ * WITH_PCF_PATTERNS (render/lighting.py picks them for frames that use them); the others
+ * hold the grid alone. */
 #include "shadow_atlas.glsl"
 
 /* The cross pattern's taps, then the nine-tap pattern's four corners (times the radius). */
@@ -56,6 +59,10 @@ float pcf_shadow(vec2 origin, float last_texel, vec2 texel, float compare, vec2 
     vec2 block = clamp(base + vec2(float(2 * bx - radius), float(2 * by - radius)),
                        vec2(0.0), vec2(last_texel - 1.0));
     vec4 weights = vec4(wx0 * wy1, wx1 * wy1, wx1 * wy0, wx0 * wy0);
+#ifdef WITH_PCF_PATTERNS
+    /* NOTE: only in WITH_PCF_PATTERNS programs: llvmpipe runs this for every pixel and
+     * every fetch whether or not the frame uses a pattern (about a twentieth of the
+     * lighting pass). */
     if (last < 0) {
       /* The pattern's tap k: its texel (clamped to the tile as shadow_tap does) in the
        * block that holds it. */
@@ -65,6 +72,7 @@ float pcf_shadow(vec2 origin, float last_texel, vec2 texel, float compare, vec2 
       weights = vec4((1.0 - d.x) * d.y, d.x * d.y, d.x * (1.0 - d.y),
                      (1.0 - d.x) * (1.0 - d.y));
     }
+#endif
     vec4 stored = textureGather(shadow_atlas, (origin + block + 1.0) * atlas_step);
     float plane = compare + dot(depth_per_texel, block + 0.5 - texel);
     vec4 planes = plane + vec4(depth_per_texel.y, depth_per_texel.x + depth_per_texel.y,

@@ -19,17 +19,20 @@ def lighting_program(snap, emission=False, coat=False, hashed=False):
     metallic target read only when some material of the frame writes it (``emission``),
     its coat target only when some material has a coat (``coat``), the World's spherical
     harmonics evaluated only for an environment World, PCF's partial-caster mask read only
-    when some shadow caster is alpha-hashed (``hashed``), and the debug views only when
-    one is shown (shaders.py: llvmpipe pays for code a frame does not use)."""
+    when some shadow caster is alpha-hashed (``hashed``), PCF's tap patterns only when
+    the frame uses one (a pattern, or Radius 0's one hard tap), and the debug views only
+    when one is shown (shaders.py: llvmpipe pays for code a frame does not use)."""
     settings = snap.settings
     debug = settings.debug_view != "NONE" or bool(settings.debug_inset)
     point_shadows = bool(snap.points) and snap.points[0].casts_shadow
+    pcf = settings.shadow_filter == "PCF"
+    patterns = pcf and (settings.pcf_pattern != "GRID" or settings.pcf_radius < 1)
     return (LIGHTING_PROGRAMS.get(settings.shadow_filter, "lighting") +
             ("_points" if snap.points else "") +
             ("_point_shadows" if point_shadows else "") + ("_spots" if snap.spots else "") +
             ("_coat" if coat else "_emission" if emission else "") +
             ("_environment" if snap.world_sh is not None else "") +
-            ("_hashed" if hashed and settings.shadow_filter == "PCF" else "") +
+            ("_hashed" if hashed and pcf else "") + ("_patterns" if patterns else "") +
             ("_debug" if debug else ""))
 
 

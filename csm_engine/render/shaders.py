@@ -266,6 +266,13 @@ for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
     PROGRAMS[_name + "_hashed"] = dict(
         PROGRAMS[_name], on_demand=True,
         defines=PROGRAMS[_name].get("defines", ()) + (("PARTIAL_CASTERS", "1"),))
+# PCF with the cross or nine-tap pattern, or Radius 0 (one hard tap), draws with the
+# "_patterns" twins (WITH_PCF_PATTERNS, shadow_pcf.glsl); the plain PCF programs hold the
+# grid alone. Compiled when first drawn.
+for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
+    PROGRAMS[_name + "_patterns"] = dict(
+        PROGRAMS[_name], on_demand=True,
+        defines=PROGRAMS[_name].get("defines", ()) + (("WITH_PCF_PATTERNS", "1"),))
 for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
     PROGRAMS[_name + "_debug"] = dict(
         PROGRAMS[_name],

@@ -8,7 +8,7 @@ import pytest
 
 from csm_engine.core import shadow_plan
 from csm_engine.core.camera import CameraProjection, CameraView
-from csm_engine.core.frame import FrameSnapshot, SpotLight, Sun
+from csm_engine.core.frame import FrameSnapshot, PointLight, SpotLight, Sun
 from csm_engine.core.frame_layout import FRAME_LAYOUT
 from csm_engine.core.settings_model import default_settings
 
@@ -144,3 +144,43 @@ def test_the_fitted_range_is_split_with_its_own_lambda():
     # Without the fit, Lambda over clip start .. far clip, and Lambda (Fitted) is not read.
     plain = splits(fit_to_visible=False, split_lambda=0.0, fitted_split_lambda=1.0)
     assert plain[0] == pytest.approx(0.1) and plain[1] == pytest.approx(0.1 + 119.9 / 3)
+
+
+@pytest.mark.parametrize("viewport", [False, True])
+@pytest.mark.parametrize("to_light", [(0.3, -0.2, 0.93), (0.0, 0.0, 1.0), (-0.7, 0.6, 0.2),
+                                      (0.05, 0.99, 0.1)])
+def test_sun_cascades_project_with_w_exactly_one(to_light, viewport):
+    """The lighting pass takes a sun cascade's last row as (0, 0, 0, 1), so its lookup's w
+    as exactly 1 (lighting_frag.glsl's add_sun): any other bits would move its shadows."""
+    snap = _snapshot(cascade_count=4, stabilize=viewport)
+    direction = np.array(to_light) / np.linalg.norm(to_light)
+    snap.sun = Sun(to_light=direction, color=np.ones(3), casts_shadow=True)
+    snap.is_viewport = viewport
+    plan = shadow_plan.plan_shadows(snap, BOUNDS)
+    shadow_plan.layout_atlas(plan.tiles)
+    frame = FRAME_LAYOUT.unpack(shadow_plan.pack_frame(snap, plan))
+    assert plan.cascade_count == 4
+    for tile in frame["shadow_tiles"][:plan.cascade_count]:
+        assert tile["is_perspective"] == 0
+        assert tile["shadow_from_world"][3].tolist() == [0.0, 0.0, 0.0, 1.0]
+
+
+def test_spot_and_point_light_tiles_pack_as_perspective():
+    """The lighting pass takes every spot and point-light tile as perspective
+    (lighting_frag.glsl): the orthographic lookup would put their shadows elsewhere."""
+    snap = _snapshot()
+    world_from_light = np.eye(4)
+    world_from_light[:3, 3] = (0.0, 0.0, 10.0)
+    snap.spots.append(SpotLight(position=np.array([0.0, 0.0, 10.0]),
+                                direction=np.array([0.0, 0.0, -1.0]), color=np.ones(3),
+                                radius=30.0, spot_size=math.radians(60), spot_blend=0.1,
+                                casts_shadow=True, world_from_light=world_from_light,
+                                clip_start=0.1))
+    snap.points.append(PointLight(np.array([2.0, 1.0, 3.0]), np.ones(3), 20.0,
+                                  casts_shadow=True))
+    plan = shadow_plan.plan_shadows(snap, BOUNDS)
+    shadow_plan.layout_atlas(plan.tiles)
+    frame = FRAME_LAYOUT.unpack(shadow_plan.pack_frame(snap, plan))
+    lights = frame["shadow_tiles"][plan.cascade_count:len(plan.tiles)]
+    assert len(lights) == 1 + 6
+    assert [int(tile["is_perspective"]) for tile in lights] == [1] * 7
