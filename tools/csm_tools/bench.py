@@ -689,8 +689,8 @@ def markdown_tables(results):
         out.append(f"| {skipped['name']} | skipped: {skipped['reason']} | | | |")
     out += ["", "### Camera animation, like for like", "",
             "Both engines render the same camera animation (described above), frame_set "
-            "then a final render per frame; the mean frame of each. EEVEE's frame of a "
-            "camera animation costs it more than its unchanged F12 above.", "",
+            "then a final render per frame; the mean frame of each (EEVEE's unchanged F12 "
+            "above is its frame of a still scene).", "",
             "| scene | CSM frame | EEVEE frame (1 sample) | EEVEE / CSM |",
             "|---|---:|---:|---:|"]
     for s in results["scenes"]:
