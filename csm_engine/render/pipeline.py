@@ -189,7 +189,7 @@ class Pipeline:
             gbuffer, kept = draw_gbuffer(
                 targets, snap, cache, lists, instances, frame_ubo, frame_data, width, height,
                 ids)
-            # Its colour targets hold integers (gbuffer_layout.glsl): the depth is read.
+            # Its colour targets hold packed bits (gbuffer_layout.glsl): its depth is read.
             return gbuffer, kept, self._sync(gbuffer.framebuffer, "gbuffer", t, True)
 
         t = time.perf_counter()

@@ -9,6 +9,10 @@ needs; twins a render may never use are compiled when first drawn (``on_demand``
 ``shaders.py`` compiles what this table describes. Pure data: no ``gpu`` here.
 """
 
+# A full-screen triangle's vertex stage (fullscreen_vert.glsl), shared by the screen passes.
+_FULLSCREEN = dict(vertex="fullscreen_vert.glsl", inputs=(("pos", "VEC2"),),
+                   interface=(("screen_uv", "VEC2", "smooth"),))
+
 # Each program: vertex inputs, interface (name, type, interpolation), push constants,
 # samplers, whether it reads the frame uniform block, fragment outputs.
 PROGRAMS = {
@@ -37,9 +41,7 @@ PROGRAMS = {
         outputs=(("VEC4", "out_partial_caster"),),
     ),
     "lighting": dict(
-        vertex="fullscreen_vert.glsl", fragment="lighting_frag.glsl",
-        inputs=(("pos", "VEC2"),),
-        interface=(("screen_uv", "VEC2", "smooth"),),
+        _FULLSCREEN, fragment="lighting_frag.glsl",
         push=(),
         samplers=(("FLOAT_2D", "gbuffer_surface_target"), ("FLOAT_2D", "gbuffer_depth"),
                   ("FLOAT_2D", "shadow_atlas"), ("FLOAT_2D", "shadow_partial"),
@@ -48,36 +50,28 @@ PROGRAMS = {
         outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
     ),
     "background": dict(
-        vertex="fullscreen_vert.glsl", fragment="background_frag.glsl",
-        inputs=(("pos", "VEC2"),),
-        interface=(("screen_uv", "VEC2", "smooth"),),
+        _FULLSCREEN, fragment="background_frag.glsl",
         push=(),
         samplers=(),
         frame=True,
         outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
     ),
     "fxaa": dict(
-        vertex="fullscreen_vert.glsl", fragment="fxaa_frag.glsl",
-        inputs=(("pos", "VEC2"),),
-        interface=(("screen_uv", "VEC2", "smooth"),),
+        _FULLSCREEN, fragment="fxaa_frag.glsl",
         push=(),
         samplers=(("FLOAT_2D", "source"),),
         frame=False,
         outputs=(("VEC4", "out_color"),),
     ),
     "depth_range": dict(
-        vertex="fullscreen_vert.glsl", fragment="depth_range_frag.glsl",
-        inputs=(("pos", "VEC2"),),
-        interface=(("screen_uv", "VEC2", "smooth"),),
+        _FULLSCREEN, fragment="depth_range_frag.glsl",
         push=(),
         samplers=(("FLOAT_2D", "source"),),
         frame=False,
         outputs=(("VEC4", "out_color"),),
     ),
     "accumulate": dict(
-        vertex="fullscreen_vert.glsl", fragment="accumulate_frag.glsl",
-        inputs=(("pos", "VEC2"),),
-        interface=(("screen_uv", "VEC2", "smooth"),),
+        _FULLSCREEN, fragment="accumulate_frag.glsl",
         push=(("FLOAT", "sample_share"),),
         samplers=(("FLOAT_2D", "previous"), ("FLOAT_2D", "current")),
         frame=False,
@@ -167,9 +161,7 @@ for _name in [name for name in PROGRAMS
 # only: where to search), the horizon search (visible and open arcs, view depth, packed
 # normal) and the separable depth-aware blur, rows (the same sums) then columns (AO, view
 # depth); lighting brings it to full resolution and multiplies its ambient term by it.
-_AO_COMMON = dict(vertex="fullscreen_vert.glsl", fragment="ao_frag.glsl",
-                  inputs=(("pos", "VEC2"),), interface=(("screen_uv", "VEC2", "smooth"),),
-                  push=(), frame=True)
+_AO_COMMON = dict(_FULLSCREEN, fragment="ao_frag.glsl", push=(), frame=True)
 PROGRAMS["ao_mask"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),),
                            outputs=(), depth_write="ANY", defines=(("AO_MASK", "1"),))
 PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
@@ -192,6 +184,22 @@ PROGRAMS["shadow_volume"] = dict(
     samplers=(("FLOAT_2D", "gbuffer_depth"),), frame=True,
     outputs=(("VEC4", "out_count"),))
 
+def _add_lighting_twins(suffixes, defines=(), needs="", on_demand=True):
+    """For every lighting program so far (whose name holds ``needs``) a twin named with
+    each suffix, compiled with the defines added: ``suffixes`` is one suffix (with
+    ``defines``) or a dict suffix -> its defines. ``on_demand``: compiled when first drawn
+    (False keeps the program's own setting)."""
+    if isinstance(suffixes, str):
+        suffixes = {suffixes: defines}
+    for name in [name for name in PROGRAMS if name.startswith("lighting") and needs in name]:
+        spec = PROGRAMS[name]
+        for suffix, added in suffixes.items():
+            twin = dict(spec, defines=spec.get("defines", ()) + tuple(added))
+            if on_demand:
+                twin["on_demand"] = True
+            PROGRAMS[name + suffix] = twin
+
+
 # One lighting program per Shadow Filter setting (SHADOW_FILTER, see shadow_lookup.glsl): the
 # plain "lighting" is PCF. Each has "_points" and "_spots" twins with the point- and
 # spot-light loops (POINT_LIGHTS, SPOT_LIGHTS), used when the scene has such lights:
@@ -206,46 +214,29 @@ for _filter in ("HARD", "SOFT", "EXACT"):
 for _feature, _define, _needs in (("_points", "POINT_LIGHTS", ""),
                                   ("_point_shadows", "POINT_SHADOWS", "_points"),
                                   ("_spots", "SPOT_LIGHTS", "")):
-    for _name in [name for name in PROGRAMS if name.startswith("lighting") and _needs in name]:
-        PROGRAMS[_name + _feature] = dict(
-            PROGRAMS[_name], defines=PROGRAMS[_name].get("defines", ()) + ((_define, "1"),))
+    _add_lighting_twins(_feature, ((_define, "1"),), needs=_needs, on_demand=False)
 # Frames whose materials emit or are metal read the emission and metallic target with the
 # "_emission" twins (SURFACE_EMISSION), frames with a coated material the coat target too
 # with the "_coat" twins (SURFACE_EMISSION and SURFACE_COAT, as the G-buffer writes the
 # emission target whenever it writes the coat's): the plain programs read neither, and
 # without the metal and coat layers set up the lit image costs about a fifth less.
 # Compiled when first drawn (``on_demand``, below).
-for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
-    _defines = PROGRAMS[_name].get("defines", ()) + (("SURFACE_EMISSION", "1"),)
-    PROGRAMS[_name + "_emission"] = dict(PROGRAMS[_name], on_demand=True, defines=_defines)
-    PROGRAMS[_name + "_coat"] = dict(PROGRAMS[_name], on_demand=True,
-                                     defines=_defines + (("SURFACE_COAT", "1"),))
+_add_lighting_twins({"_emission": (("SURFACE_EMISSION", "1"),),
+                     "_coat": (("SURFACE_EMISSION", "1"), ("SURFACE_COAT", "1"))})
 # Frames whose World is an environment (spherical harmonics beyond band 0) draw with the
 # "_environment" twins (WORLD_ENVIRONMENT, world_light.glsl); a one-colour World's light
 # is the same whatever the direction, and the plain programs take it as such. Compiled
 # when first drawn.
-for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
-    PROGRAMS[_name + "_environment"] = dict(
-        PROGRAMS[_name], on_demand=True,
-        defines=PROGRAMS[_name].get("defines", ()) + (("WORLD_ENVIRONMENT", "1"),))
+_add_lighting_twins("_environment", (("WORLD_ENVIRONMENT", "1"),))
 # Frames with alpha-hashed shadow casters read the atlas's partial-caster mask with the
 # "_hashed" twins (PARTIAL_CASTERS, shadow_atlas.glsl); elsewhere the mask is clear and
 # PCF's lookup skips the fetch. Compiled when first drawn.
-for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
-    PROGRAMS[_name + "_hashed"] = dict(
-        PROGRAMS[_name], on_demand=True,
-        defines=PROGRAMS[_name].get("defines", ()) + (("PARTIAL_CASTERS", "1"),))
+_add_lighting_twins("_hashed", (("PARTIAL_CASTERS", "1"),))
 # PCF with the cross or nine-tap pattern, or Radius 0 (one hard tap), draws with the
 # "_patterns" twins (WITH_PCF_PATTERNS, shadow_pcf.glsl); the plain PCF programs hold the
 # grid alone. Compiled when first drawn.
-for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
-    PROGRAMS[_name + "_patterns"] = dict(
-        PROGRAMS[_name], on_demand=True,
-        defines=PROGRAMS[_name].get("defines", ()) + (("WITH_PCF_PATTERNS", "1"),))
-for _name in [name for name in PROGRAMS if name.startswith("lighting")]:
-    PROGRAMS[_name + "_debug"] = dict(
-        PROGRAMS[_name],
-        defines=PROGRAMS[_name].get("defines", ()) + (("WITH_DEBUG_VIEWS", "1"),))
+_add_lighting_twins("_patterns", (("WITH_PCF_PATTERNS", "1"),))
+_add_lighting_twins("_debug", (("WITH_DEBUG_VIEWS", "1"),), on_demand=False)
 
 # Final renders with render passes on draw with PASSES twins of the lighting and background
 # programs: four more targets (render/passes.py, LIGHTING_PASS_TARGETS) with the light and

@@ -78,7 +78,8 @@ def _expand_includes(name, directory, file_ids, depth=0, included=None):
         raise ShaderCompileError(f"{path}: cannot read shader ({error.strerror})") from None
     except UnicodeDecodeError as error:
         line = error.object[:error.start].count(b"\n") + 1
-        raise ShaderCompileError(f"{name}:{line}: not UTF-8 text (byte 0x{error.object[error.start]:02x}); "
+        byte = error.object[error.start]
+        raise ShaderCompileError(f"{name}:{line}: not UTF-8 text (byte 0x{byte:02x}); "
                                  "save the file as UTF-8") from None
     file_id = file_ids.setdefault(name, len(file_ids) + 1)
     base = file_id * LINES_PER_FILE

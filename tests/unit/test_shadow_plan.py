@@ -57,6 +57,16 @@ def test_atlas_packs_tiles_without_overlap():
             assert x + size <= x2 or x2 + size2 <= x or y + size <= y2 or y2 + size2 <= y
 
 
+def _shadowed_spot_above():
+    """A shadow-casting spot light 10 units above the origin, pointing down."""
+    world_from_light = np.eye(4)
+    world_from_light[:3, 3] = (0.0, 0.0, 10.0)
+    return SpotLight(position=np.array([0.0, 0.0, 10.0]), direction=np.array([0.0, 0.0, -1.0]),
+                     color=np.ones(3), radius=30.0, spot_size=math.radians(60),
+                     spot_blend=0.1, casts_shadow=True, world_from_light=world_from_light,
+                     clip_start=0.1)
+
+
 def test_impossible_manual_splits_fall_back_to_hybrid_with_a_warning():
     plan = shadow_plan.plan_shadows(
         _snapshot(split_scheme="MANUAL", manual_splits=(0.5, 0.2, 0.6)), BOUNDS)
@@ -67,13 +77,7 @@ def test_impossible_manual_splits_fall_back_to_hybrid_with_a_warning():
 def test_no_sun_shadow_means_no_cascades_but_spot_tiles_still_planned():
     snap = _snapshot()
     snap.sun.casts_shadow = False
-    world_from_light = np.eye(4)
-    world_from_light[:3, 3] = (0.0, 0.0, 10.0)
-    snap.spots.append(SpotLight(position=np.array([0.0, 0.0, 10.0]),
-                                direction=np.array([0.0, 0.0, -1.0]), color=np.ones(3),
-                                radius=30.0, spot_size=math.radians(60), spot_blend=0.1,
-                                casts_shadow=True, world_from_light=world_from_light,
-                                clip_start=0.1))
+    snap.spots.append(_shadowed_spot_above())
     plan = shadow_plan.plan_shadows(snap, BOUNDS)
     assert plan.cascade_count == 0
     assert len(plan.tiles) == 1 and plan.tiles[0].is_perspective
@@ -169,13 +173,7 @@ def test_spot_and_point_light_tiles_pack_as_perspective():
     """The lighting pass takes every spot and point-light tile as perspective
     (lighting_frag.glsl): the orthographic lookup would put their shadows elsewhere."""
     snap = _snapshot()
-    world_from_light = np.eye(4)
-    world_from_light[:3, 3] = (0.0, 0.0, 10.0)
-    snap.spots.append(SpotLight(position=np.array([0.0, 0.0, 10.0]),
-                                direction=np.array([0.0, 0.0, -1.0]), color=np.ones(3),
-                                radius=30.0, spot_size=math.radians(60), spot_blend=0.1,
-                                casts_shadow=True, world_from_light=world_from_light,
-                                clip_start=0.1))
+    snap.spots.append(_shadowed_spot_above())
     snap.points.append(PointLight(np.array([2.0, 1.0, 3.0]), np.ones(3), 20.0,
                                   casts_shadow=True))
     plan = shadow_plan.plan_shadows(snap, BOUNDS)
