@@ -20,7 +20,9 @@ How each number is taken:
 - Camera animation (fly-through): ``flythrough_frames``, the camera keyed a little further
   each frame, ``frame_set`` + a final render per frame, the mean frame; rendered by both
   engines (``flythrough_ratio`` divides EEVEE's by CSM's), and once more by CSM with
-  profiling on for its per-pass split (``flythrough_split_s``).
+  profiling on for its per-pass split (``flythrough_split_s``). ``frame_budget`` says
+  what EEVEE's frame over 20 leaves for shading after the rest of that split, next to the
+  least a full-screen pass costs here (``minimal_pass_s``).
 - Viewport: what ``CSMRenderEngine.view_draw`` does per redraw, minus the window: the
   snapshot (``engine.ViewportSnapshots``: read again only after a depsgraph update, as
   ``view_update`` reports them), then ``Pipeline.draw`` into an offscreen target.
@@ -43,7 +45,7 @@ from csm_engine.blender.cli import (CLIError, EXIT_RENDER, EXIT_USAGE, apply_ove
                                     keep_freed_memory, open_scene, parse_resolution,
                                     run_reporting_errors)
 
-from . import bench_models, report_io
+from . import bench_models, frame_budget, report_io
 from .bench_scenes import (SUZANNE_TRIANGLES, animate_one_object, build_field_scene,
                            scene_triangles)
 
@@ -592,6 +594,8 @@ def run(argv, prog=PROG):
             log(f"scene '{name}' skipped: {error}")
             results["skipped"].append({"name": name, "reason": str(error)})
     results["load_average"] = _load_average()
+    results["minimal_pass_s"] = frame_budget.minimal_pass_seconds(width, height)
+    log(f"a minimal full-screen pass: {results['minimal_pass_s'] * 1000:.1f} ms")
     if not args.no_animation:
         results["animation"] = animation_run(args.quick, width, height, args.overrides)
     if not args.no_scaling:
@@ -725,6 +729,7 @@ def markdown_tables(results):
         if split:
             out.append(f"| {s['name']} | {split['shadow_tiles_drawn']:.2f} | " +
                        " | ".join(f"{split[k] * 1000:.1f}" for k in keys) + " |")
+    out += frame_budget.budget_markdown(results)
     out += ["", "### Viewport (camera-only redraws, then a one-object edit)", "",
             "| scene | uploads in camera-only redraws | shadow tiles drawn / kept | Python "
             "overhead (median / max) | frame incl. GPU | one-object edit, to finished redraw |",

@@ -60,6 +60,16 @@ def test_quick_benchmark_reports_both_engines_and_a_free_camera_redraw(tmp_path)
     flythrough = field["eevee"]["median_s"] / field["csm"]["flythrough_s"]
     assert "CSM fly-through" in text and f"| {flythrough:.1f}x |" in text
     assert f"**{field['flythrough_ratio']:.1f}x** |" in text
+    # What 20x would leave for shading: EEVEE's animation frame over 20, less CSM's
+    # geometry passes and fixed costs, and the least a full-screen pass costs here.
+    assert 0 < results["minimal_pass_s"] < field["flythrough_split_s"]["lighting"] * 10
+    flight = field["flythrough_split_s"]
+    budget = field["eevee"]["flythrough_s"] / 20
+    left = budget - flight["shadow"] - flight["gbuffer"] - sum(
+        flight[k] for k in ("scene_read", "mesh_upload", "python_setup", "depth_range",
+                            "readback", "blender"))
+    assert f"| field | {budget * 1000:,.0f} | " in text
+    assert f" | {left * 1000:,.0f} | " in text
 
 
 def test_markdown_page_without_markers_is_refused_before_the_run(tmp_path):
