@@ -1,5 +1,6 @@
 """The in-Blender half shared by the GUI drivers that play a user's session
-(``gui_controls_driver.py``, ``gui_student_driver.py``).
+(``gui_controls_driver.py``, ``gui_student_driver.py``) and the viewport driver
+(``gui_driver.py``, which uses its session, log and draw counting only).
 
 Owns what every such session needs: real X key and mouse events through ``xdotool``,
 Blender's window and region coordinates turned into screen pixels, screenshots and the JSON
@@ -27,7 +28,8 @@ TOTAL_LIMIT_S = 150.0
 
 sys.dont_write_bytecode = True   # no __pycache__ in the checkout
 
-STATE = {"started": time.monotonic(), "draws": 0, "draw_error": None, "window": None,
+STATE = {"started": time.monotonic(), "draws": 0, "draw_error": None, "mesh_uploads": 0,
+         "window": None,
          "area": None, "region": None, "condition": None, "condition_name": "",
          "condition_since": 0.0}
 REPORT = {"error": None, "blender": bpy.app.version_string, "steps": [], "timings_s": {}}
@@ -61,9 +63,10 @@ def finish(exit_code):
 # --- Blender's windows --------------------------------------------------------------------
 
 def count_view_draws():
-    """Wrap the engine's view_draw to know when the viewport has really drawn a frame.
-    Blender looks the method up on the class at every call, so wrapping it after
-    registration reaches the engine instance the viewport creates."""
+    """Wrap the engine's view_draw to know when the viewport has really drawn a frame, and
+    how many meshes it has uploaded so far. Blender looks the method up on the class at
+    every call, so wrapping it after registration reaches the engine instance the viewport
+    creates."""
     from csm_engine.blender import engine
     original = engine.CSMRenderEngine.view_draw
 
@@ -75,6 +78,7 @@ def count_view_draws():
             STATE["draw_error"] = traceback.format_exc()
             raise
         STATE["draws"] += 1
+        STATE["mesh_uploads"] = self.snapshots.mesh_uploads
 
     engine.CSMRenderEngine.view_draw = view_draw
 

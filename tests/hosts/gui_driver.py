@@ -23,13 +23,18 @@ Everything runs from ``bpy.app.timers`` callbacks, because a ``-P`` script runs 
 window has drawn once. The process exits with ``os._exit`` so no quit dialog can block it.
 """
 
-import json
 import os
 import sys
 import time
 import traceback
 
 import bpy
+
+sys.dont_write_bytecode = True   # no __pycache__ in the checkout
+# The shared half of the drivers sits beside this file (Blender puts no script folder
+# on sys.path).
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from gui_common import REPORT, STATE, count_view_draws, finish, log, start  # noqa: E402
 
 # Never hard-code the clone's location: tests/hosts/gui_driver.py -> repository root.
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -47,48 +52,11 @@ VIEWPORT_ASPECT = (16, 9)   # camera frame aspect while the viewport is captured
 SPHERE_DISTANCE = 40.0      # scene units in front of the camera (default.json's scale)
 SPHERE_RADIUS = 6.0
 
-sys.dont_write_bytecode = True   # no __pycache__ in the checkout
 if REPO not in sys.path:
     sys.path.insert(0, REPO)
 
-STATE = {"started": time.monotonic(), "step": "setup", "draws": 0, "draws_at_mark": 0,
-         "draw_error": None, "mesh_uploads": 0, "window": None, "area": None, "region": None}
-REPORT = {"error": None, "blender": bpy.app.version_string, "timings_s": {}}
-
-
-def log(message):
-    print(f"gui_driver: {time.monotonic() - STATE['started']:6.2f} s: {message}", flush=True)
-
-
-def finish(exit_code):
-    REPORT["timings_s"]["total"] = round(time.monotonic() - STATE["started"], 3)
-    with open(os.path.join(OUT_DIR, "viewport.json"), "w") as handle:
-        json.dump(REPORT, handle, indent=2)
-    log(f"done, exit code {exit_code}")
-    sys.stdout.flush()
-    sys.stderr.flush()
-    os._exit(exit_code)
-
-
-def count_view_draws():
-    """Wrap the engine's view_draw so the driver knows when a frame has really been drawn.
-
-    Blender looks the method up on the class at every call, so wrapping it after
-    registration takes effect for the engine instance the viewport creates."""
-    from csm_engine.blender import engine
-    original = engine.CSMRenderEngine.view_draw
-
-    def view_draw(self, context, depsgraph):
-        try:
-            original(self, context, depsgraph)
-        except Exception:
-            # Blender would only print it; the driver stops at its next tick and reports it.
-            STATE["draw_error"] = traceback.format_exc()
-            raise
-        STATE["draws"] += 1
-        STATE["mesh_uploads"] = self.snapshots.mesh_uploads
-
-    engine.CSMRenderEngine.view_draw = view_draw
+start("gui_driver", OUT_DIR, "viewport.json", "viewport")
+STATE.update(step="setup", draws_at_mark=0)
 
 
 def empty_startup_scene():
