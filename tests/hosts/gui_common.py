@@ -184,6 +184,78 @@ def xdotool(*args):
                    stdin=subprocess.DEVNULL)
 
 
+# Where shared controls are drawn in the drivers' fixed 1600x900 window at the default UI
+# scale (measured on the screenshots).
+ADDON_CHECKBOX_FROM_LEFT_PX = 44  # Preferences > Add-ons: the first listed add-on's checkbox
+ADDON_CHECKBOX_FROM_TOP_PX = 75
+RENDER_TAB_FROM_TOP_PX = 62   # Properties editor: the Render tab, second icon of its tab column
+ENGINE_FIELD_FROM_TOP_PX = 54  # Render properties: the Render Engine dropdown, under the "Scene" path
+PIE_REACH_PX = 130           # how far up the mouse moves to the Z pie's top item
+
+
+def enable_listed_addon(number, shot_name):
+    """Preferences > Add-ons, with CSM the one add-on listed: click its checkbox, take
+    screenshot ``shot_name`` of the Preferences window once csm_engine is enabled, close
+    the window. A scenario step (``shot = yield from ...``) that returns the screenshot."""
+    prefs_window, prefs_area = window_with('PREFERENCES')
+    prefs_main = next(r for r in prefs_area.regions if r.type == 'WINDOW')
+    yield from click_in(prefs_window, prefs_main, ADDON_CHECKBOX_FROM_LEFT_PX,
+                        ADDON_CHECKBOX_FROM_TOP_PX)
+    yield until("a click on the add-on's checkbox enabled csm_engine",
+                lambda: "csm_engine" in bpy.context.preferences.addons)
+    yield pause(0.5)
+    shot = screenshot(number, shot_name, prefs_window, prefs_area)
+    with bpy.context.temp_override(window=prefs_window):
+        bpy.ops.wm.window_close()
+    yield until("the Preferences window closed", lambda: window_with('PREFERENCES') is None)
+    return shot
+
+
+def open_render_engine_menu(window):
+    """Click the Properties editor's Render tab, then its Render Engine dropdown; the
+    caller picks the engine. A scenario step (``yield from ...``)."""
+    properties = next(a for a in window.screen.areas if a.type == 'PROPERTIES')
+    tabs = next(r for r in properties.regions if r.type == 'NAVIGATION_BAR')
+    yield from click_in(window, tabs, tabs.width // 2, RENDER_TAB_FROM_TOP_PX)
+    yield until("a click on the Render tab of the Properties editor",
+                lambda: properties.spaces.active.context == 'RENDER')
+    yield pause(0.3)
+    settings = next(r for r in properties.regions if r.type == 'WINDOW')
+    yield from click_in(window, settings, settings.width * 3 // 4, ENGINE_FIELD_FROM_TOP_PX)
+    yield pause(0.5)
+
+
+def set_for_screenshots(scene, area):
+    """Set by script, not clicked: pictures that compare pixel for pixel (1600x900, no
+    dither, Standard view transform) and a clean 3D viewport ``area`` (no overlays,
+    gizmos, toolbar or tool header). Returns its space."""
+    scene.render.resolution_x, scene.render.resolution_y = 1600, 900
+    scene.render.dither_intensity = 0.0
+    scene.view_settings.view_transform = 'Standard'
+    scene.view_settings.look = 'None'
+    space = area.spaces.active
+    space.overlay.show_overlays = False
+    space.show_gizmo = False
+    space.show_region_toolbar = False
+    space.show_region_tool_header = False
+    return space
+
+
+def rendered_shading_from_pie(space):
+    """Rendered shading the way a user picks it: Z over the viewport opens the shading
+    pie, and "Rendered" is its top item (the pie lays the enum out west, east, south,
+    north). A scenario step (``yield from ...``)."""
+    x, y = mouse_to_viewport()
+    yield pause(0.2)
+    xdotool("key", "z")
+    yield pause(0.4)
+    xdotool("mousemove", x, y - PIE_REACH_PX)
+    yield pause(0.3)
+    xdotool("click", "1")
+    yield until("the Z pie switched the viewport to Rendered",
+                lambda: space.shading.type == 'RENDERED')
+
+
 def mouse_to_viewport():
     x, y = viewport_centre_on_screen()
     xdotool("mousemove", x, y)

@@ -51,9 +51,11 @@ import bpy
 # on sys.path).
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from gui_common import (  # noqa: E402 (after the path entry)
-    FIRST_PERSON, REPORT, STATE, click_in, count_view_draws, fresh_draws, menu_search,
-    mouse_to_viewport, pause, record, region_rect, run, screen_top, screenshot, sidebar,
-    start, until, viewport_centre_on_screen, watch_first_person, window_with, xdotool)
+    FIRST_PERSON, REPORT, STATE, click_in, count_view_draws, enable_listed_addon,
+    fresh_draws, menu_search, mouse_to_viewport, open_render_engine_menu, pause, record,
+    region_rect, rendered_shading_from_pie, run, screen_top, screenshot,
+    set_for_screenshots, sidebar, start, until, viewport_centre_on_screen,
+    watch_first_person, window_with, xdotool)
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 OUT_DIR = os.path.abspath(sys.argv[sys.argv.index("--") + 1]) if "--" in sys.argv else os.getcwd()
@@ -66,13 +68,8 @@ CAMERA_ZOOM_OUT_CLICKS = 1  # wheel steps out after Home in camera view
 ADDONS_TAB_FROM_TOP_PX = 189  # Preferences: the "Add-ons" section in its left column
 ADDON_SEARCH_FROM_RIGHT_PX = 90  # Preferences > Add-ons: the search field, top right
 ADDON_SEARCH_FROM_TOP_PX = 44
-ADDON_CHECKBOX_FROM_LEFT_PX = 44  # the first listed add-on's checkbox
-ADDON_CHECKBOX_FROM_TOP_PX = 75
-RENDER_TAB_FROM_TOP_PX = 62   # Properties editor: the Render tab, second icon of its tab column
-ENGINE_FIELD_FROM_TOP_PX = 54  # Render properties: the Render Engine dropdown, under the "Scene" path
 ENGINE_MENU_KEY = "s"          # the Render Engine menu's underlined key for "CSM"
 AWAY_FROM_REPORT_PX = 200     # mouse move that closes Blender's report popup
-PIE_REACH_PX = 130           # how far up the mouse moves to the Z pie's top item
 SCROLL_CLICKS = 30           # wheel clicks that scroll the CSM sidebar from end to end
 DEBUG_VIEW_FROM_LEFT_PX = 150  # the Debug panel's "View" dropdown, from the sidebar's
 DEBUG_VIEW_FROM_BOTTOM_PX = 324  # bottom-left corner with the sidebar scrolled to its end
@@ -150,15 +147,7 @@ def scenario():
     yield until("'CSM' typed in the add-on search",
                 lambda: bpy.context.window_manager.addon_search.lower() == "csm")
     yield pause(0.5)
-    yield from click_in(prefs_window, prefs_main, ADDON_CHECKBOX_FROM_LEFT_PX,
-                        ADDON_CHECKBOX_FROM_TOP_PX)
-    yield until("a click on the add-on's checkbox enabled csm_engine",
-                lambda: "csm_engine" in bpy.context.preferences.addons)
-    yield pause(0.5)
-    addon_enabled = screenshot(1, "addon_enabled", prefs_window, prefs_area)
-    with bpy.context.temp_override(window=prefs_window):
-        bpy.ops.wm.window_close()
-    yield until("the Preferences window closed", lambda: window_with('PREFERENCES') is None)
+    addon_enabled = yield from enable_listed_addon(1, "addon_enabled")
     import csm_engine
     from csm_engine.blender import ui
     count_view_draws()
@@ -181,16 +170,7 @@ def scenario():
     # current scene's contents by default: the startup cube, camera and lamp go).
     scene = bpy.context.scene
     startup_objects = sorted(o.name for o in scene.objects)
-    properties = next(a for a in window.screen.areas if a.type == 'PROPERTIES')
-    tabs = next(r for r in properties.regions if r.type == 'NAVIGATION_BAR')
-    yield from click_in(window, tabs, tabs.width // 2, RENDER_TAB_FROM_TOP_PX)
-    yield until("a click on the Render tab of the Properties editor",
-                lambda: properties.spaces.active.context == 'RENDER')
-    yield pause(0.3)
-    render_settings = next(r for r in properties.regions if r.type == 'WINDOW')
-    yield from click_in(window, render_settings, render_settings.width * 3 // 4,
-                        ENGINE_FIELD_FROM_TOP_PX)
-    yield pause(0.5)
+    yield from open_render_engine_menu(window)
     engine_menu = screenshot(2, "engine_menu")
     xdotool("key", ENGINE_MENU_KEY)
     yield until(f"{ENGINE_MENU_KEY} in the Render Engine menu chose CSM",
@@ -224,15 +204,7 @@ def scenario():
     objects_after_import = sorted(o.name for o in scene.objects)
     imported_objects = sorted(o.name for c in scene_builder.imported_collections(scene)
                               for o in c.all_objects)
-    scene.render.resolution_x, scene.render.resolution_y = 1600, 900
-    scene.render.dither_intensity = 0.0
-    scene.view_settings.view_transform = 'Standard'
-    scene.view_settings.look = 'None'
-    space = area.spaces.active
-    space.overlay.show_overlays = False
-    space.show_gizmo = False
-    space.show_region_toolbar = False
-    space.show_region_tool_header = False
+    space = set_for_screenshots(scene, area)
     # Through the imported camera: Numpad 0, Home (fit the camera frame to the view), and
     # the wheel out a little so the whole frame shows beside the sidebar.
     mouse_to_viewport()
@@ -244,19 +216,8 @@ def scenario():
     yield pause(0.3)
     xdotool("click", "--repeat", CAMERA_ZOOM_OUT_CLICKS, "--delay", 50, "5")
     yield pause(0.3)
-    # Rendered shading the way a user picks it: Z over the viewport opens the shading pie,
-    # and "Rendered" is its top item (the pie lays the enum out west, east, south, north).
     shading_before = space.shading.type
-    mouse_to_viewport()
-    yield pause(0.2)
-    xdotool("key", "z")
-    yield pause(0.4)
-    x, y = viewport_centre_on_screen()
-    xdotool("mousemove", x, y - PIE_REACH_PX)
-    yield pause(0.3)
-    xdotool("click", "1")
-    yield until("the Z pie switched the viewport to Rendered",
-                lambda: space.shading.type == 'RENDERED')
+    yield from rendered_shading_from_pie(space)
     yield fresh_draws(2)
     # The same view before the sidebar opens, so the test can see what the panel changed.
     before_sidebar = screenshot(2, "before_sidebar")

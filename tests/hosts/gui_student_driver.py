@@ -35,8 +35,9 @@ import bpy
 # on sys.path).
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from gui_common import (  # noqa: E402 (after the path entry)
-    FIRST_PERSON, STATE, click_in, count_view_draws, fresh_draws, mouse_to_viewport, pause,
-    record, run, screen_height, screen_top, screenshot, sidebar, start, until,
+    FIRST_PERSON, STATE, click_in, count_view_draws, enable_listed_addon, fresh_draws,
+    mouse_to_viewport, open_render_engine_menu, pause, record, rendered_shading_from_pie,
+    run, screen_height, screen_top, screenshot, set_for_screenshots, sidebar, start, until,
     watch_first_person, window_with, xdotool)
 
 ARGS = sys.argv[sys.argv.index("--") + 1:]
@@ -49,12 +50,7 @@ BLEND_BAND_M = 20
 ADDONS_TAB_FROM_TOP_PX = 189
 INSTALL_FROM_RIGHT_PX = 157       # Preferences > Add-ons: the "Install..." button
 INSTALL_FROM_TOP_PX = 18
-ADDON_CHECKBOX_FROM_LEFT_PX = 44
-ADDON_CHECKBOX_FROM_TOP_PX = 75
-RENDER_TAB_FROM_TOP_PX = 62
-ENGINE_FIELD_FROM_TOP_PX = 54
 FILE_MENU_PX = (46, 13)           # the top bar's "File", from the window's top-left
-PIE_REACH_PX = 130
 CSM_TAB_FROM_RIGHT_PX = 12
 CSM_TAB_FROM_TOP_PX = 160
 PRESET_MENU_FROM_LEFT_PX = 167    # the preset icon in the sidebar's Cascades header
@@ -150,17 +146,7 @@ def walk():
                 lambda: window_with('FILE_BROWSER') is None
                 and "csm" in bpy.context.window_manager.addon_search.lower())
     yield pause(0.8)
-    prefs_window, prefs_area = window_with('PREFERENCES')
-    prefs_main = next(r for r in prefs_area.regions if r.type == 'WINDOW')
-    yield from click_in(prefs_window, prefs_main, ADDON_CHECKBOX_FROM_LEFT_PX,
-                        ADDON_CHECKBOX_FROM_TOP_PX)
-    yield until("a click on the add-on's checkbox enabled csm_engine",
-                lambda: "csm_engine" in bpy.context.preferences.addons)
-    yield pause(0.5)
-    shot = screenshot(1, "installed", prefs_window, prefs_area)
-    with bpy.context.temp_override(window=prefs_window):
-        bpy.ops.wm.window_close()
-    yield until("the Preferences window closed", lambda: window_with('PREFERENCES') is None)
+    shot = yield from enable_listed_addon(1, "installed")
     import csm_engine
     count_view_draws()
     watch_first_person()
@@ -168,14 +154,7 @@ def walk():
            addon_search=bpy.context.window_manager.addon_search)
 
     # 2. Render Engine: CSM; File > Import > CSM Sample Scene > Default (Replace).
-    properties = next(a for a in window.screen.areas if a.type == 'PROPERTIES')
-    tabs = next(r for r in properties.regions if r.type == 'NAVIGATION_BAR')
-    yield from click_in(window, tabs, tabs.width // 2, RENDER_TAB_FROM_TOP_PX)
-    yield until("a click on the Render tab", lambda: properties.spaces.active.context == 'RENDER')
-    yield pause(0.3)
-    settings = next(r for r in properties.regions if r.type == 'WINDOW')
-    yield from click_in(window, settings, settings.width * 3 // 4, ENGINE_FIELD_FROM_TOP_PX)
-    yield pause(0.5)
+    yield from open_render_engine_menu(window)
     xdotool("key", "s")
     yield until("S in the Render Engine menu chose CSM", lambda: scene.render.engine == 'CSM')
     xdotool("mousemove", window.x + FILE_MENU_PX[0], screen_height() - window.y
@@ -196,16 +175,7 @@ def walk():
     objects_after = sorted(o.name for o in scene.objects)
     imported_objects = sorted(o.name for c in scene_builder.imported_collections(scene)
                               for o in c.all_objects)
-    # Set by script: pictures that compare pixel for pixel, clean screenshots.
-    scene.render.resolution_x, scene.render.resolution_y = 1600, 900
-    scene.render.dither_intensity = 0.0
-    scene.view_settings.view_transform = 'Standard'
-    scene.view_settings.look = 'None'
-    space = area.spaces.active
-    space.overlay.show_overlays = False
-    space.show_gizmo = False
-    space.show_region_toolbar = False
-    space.show_region_tool_header = False
+    space = set_for_screenshots(scene, area)
     yield pause(0.3)
     record(2, "imported", menu, imported=imported, startup_objects=startup_objects,
            objects_after=objects_after, imported_objects=imported_objects,
@@ -220,14 +190,7 @@ def walk():
     yield pause(0.3)
     xdotool("click", "5")
     yield pause(0.3)
-    x, y = mouse_to_viewport()
-    yield pause(0.2)
-    xdotool("key", "z")
-    yield pause(0.4)
-    xdotool("mousemove", x, y - PIE_REACH_PX)
-    yield pause(0.3)
-    xdotool("click", "1")
-    yield until("the Z pie chose Rendered", lambda: space.shading.type == 'RENDERED')
+    yield from rendered_shading_from_pie(space)
     mouse_to_viewport()
     yield pause(0.2)
     xdotool("key", "n")
