@@ -9,9 +9,11 @@ needs; twins a render may never use are compiled when first drawn (``on_demand``
 ``shaders.py`` compiles what this table describes. Pure data: no ``gpu`` here.
 """
 
-# A full-screen triangle's vertex stage (fullscreen_vert.glsl), shared by the screen passes.
+# A full-screen triangle's vertex stage (fullscreen_vert.glsl), shared by the screen passes,
+# and what most of them have: no push constants, no frame block, one colour output.
 _FULLSCREEN = dict(vertex="fullscreen_vert.glsl", inputs=(("pos", "VEC2"),),
-                   interface=(("screen_uv", "VEC2", "smooth"),))
+                   interface=(("screen_uv", "VEC2", "smooth"),), push=(), frame=False,
+                   outputs=(("VEC4", "out_color"),))
 
 # Each program: vertex inputs, interface (name, type, interpolation), push constants,
 # samplers, whether it reads the frame uniform block, fragment outputs.
@@ -42,40 +44,21 @@ PROGRAMS = {
     ),
     "lighting": dict(
         _FULLSCREEN, fragment="lighting_frag.glsl",
-        push=(),
         samplers=(("FLOAT_2D", "gbuffer_surface_target"), ("FLOAT_2D", "gbuffer_depth"),
                   ("FLOAT_2D", "shadow_atlas"), ("FLOAT_2D", "shadow_partial"),
                   ("FLOAT_2D", "gbuffer_emission")),
-        frame=True,
-        outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
+        frame=True, outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
     ),
     "background": dict(
-        _FULLSCREEN, fragment="background_frag.glsl",
-        push=(),
-        samplers=(),
-        frame=True,
-        outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
+        _FULLSCREEN, fragment="background_frag.glsl", samplers=(),
+        frame=True, outputs=(("VEC4", "out_color"), ("VEC4", "out_aux")),
     ),
-    "fxaa": dict(
-        _FULLSCREEN, fragment="fxaa_frag.glsl",
-        push=(),
-        samplers=(("FLOAT_2D", "source"),),
-        frame=False,
-        outputs=(("VEC4", "out_color"),),
-    ),
-    "depth_range": dict(
-        _FULLSCREEN, fragment="depth_range_frag.glsl",
-        push=(),
-        samplers=(("FLOAT_2D", "source"),),
-        frame=False,
-        outputs=(("VEC4", "out_color"),),
-    ),
+    "fxaa": dict(_FULLSCREEN, fragment="fxaa_frag.glsl", samplers=(("FLOAT_2D", "source"),)),
+    "depth_range": dict(_FULLSCREEN, fragment="depth_range_frag.glsl",
+                        samplers=(("FLOAT_2D", "source"),)),
     "accumulate": dict(
-        _FULLSCREEN, fragment="accumulate_frag.glsl",
-        push=(("FLOAT", "sample_share"),),
+        _FULLSCREEN, fragment="accumulate_frag.glsl", push=(("FLOAT", "sample_share"),),
         samplers=(("FLOAT_2D", "previous"), ("FLOAT_2D", "current")),
-        frame=False,
-        outputs=(("VEC4", "out_color"),),
     ),
     "lines": dict(
         vertex="lines_vert.glsl", fragment="lines_frag.glsl",
@@ -161,7 +144,7 @@ for _name in [name for name in PROGRAMS
 # only: where to search), the horizon search (visible and open arcs, view depth, packed
 # normal) and the separable depth-aware blur, rows (the same sums) then columns (AO, view
 # depth); lighting brings it to full resolution and multiplies its ambient term by it.
-_AO_COMMON = dict(_FULLSCREEN, fragment="ao_frag.glsl", push=(), frame=True)
+_AO_COMMON = dict(_FULLSCREEN, fragment="ao_frag.glsl", frame=True)
 PROGRAMS["ao_mask"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),),
                            outputs=(), depth_write="ANY", defines=(("AO_MASK", "1"),))
 PROGRAMS["ao"] = dict(_AO_COMMON, samplers=(("FLOAT_2D", "gbuffer_depth"),
