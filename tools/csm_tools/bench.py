@@ -33,6 +33,7 @@ How each number is taken:
 """
 
 import argparse
+import contextlib
 import dataclasses
 import json
 import math
@@ -213,23 +214,16 @@ def full_frames(scene, repeat):
     return frames
 
 
-def flythrough_frames(scene, repeat, engine_id="CSM", profile=False):
-    """A camera animation rendered as ``-a`` renders it: the camera keyed at the current
-    frame and at each of the ``repeat`` frames after it, 5 cm further forward and a tenth
-    of a degree more turned each frame (always the same way); per frame ``frame_set``,
-    then a final render with ``engine_id``, so every render is of a new frame number.
-    CSM draws every view-dependent pass again and keeps the meshes, and a shadow map
-    whose box is the same as the frame before's. The camera's keys, its place and the
-    current frame are put back afterwards. Returns the seconds per rendered frame; with
-    ``profile`` (CSM) a list of per-step seconds per frame instead (``flythrough_split``)."""
-    scene.render.engine = engine_id
-    if engine_id != "CSM":
-        scene.eevee.taa_render_samples = 1
+@contextlib.contextmanager
+def camera_flight(scene, repeat):
+    """The camera keyed at the current frame and at each of the ``repeat`` frames after
+    it, 5 cm further forward and a tenth of a degree more turned each frame (always the
+    same way); yields the frame numbers to render. The camera's keys, its place and the
+    current frame are put back afterwards."""
     camera = scene.camera
     location, rotation = camera.location.copy(), camera.rotation_euler.copy()
     had_animation = camera.animation_data is not None and camera.animation_data.action
     start = scene.frame_current
-    frames = []
     try:
         for frame in range(start, start + repeat + 1):
             if frame > start:
@@ -238,15 +232,30 @@ def flythrough_frames(scene, repeat, engine_id="CSM", profile=False):
                 camera.rotation_euler.z += math.radians(0.1)
             camera.keyframe_insert("location", frame=frame)
             camera.keyframe_insert("rotation_euler", frame=frame)
-        for frame in range(start + 1, start + repeat + 1):
-            scene.frame_set(frame)
-            result = render_once(scene, profile=profile)
-            frames.append(_split(result) if profile else result.timings["wall"])
+        yield range(start + 1, start + repeat + 1)
     finally:
         if not had_animation:
             camera.animation_data_clear()
         scene.frame_set(start)
         camera.location, camera.rotation_euler = location, rotation
+
+
+def flythrough_frames(scene, repeat, engine_id="CSM", profile=False):
+    """A camera animation rendered as ``-a`` renders it (``camera_flight``): per frame
+    ``frame_set``, then a final render with ``engine_id``, so every render is of a new
+    frame number. CSM draws every view-dependent pass again and keeps the meshes, and a
+    shadow map whose box is the same as the frame before's. Returns the seconds per
+    rendered frame; with ``profile`` (CSM) a list of per-step seconds per frame instead
+    (``flythrough_split``)."""
+    scene.render.engine = engine_id
+    if engine_id != "CSM":
+        scene.eevee.taa_render_samples = 1
+    frames = []
+    with camera_flight(scene, repeat) as numbers:
+        for frame in numbers:
+            scene.frame_set(frame)
+            result = render_once(scene, profile=profile)
+            frames.append(step_seconds(result) if profile else result.timings["wall"])
     return frames
 
 
@@ -261,7 +270,7 @@ def flythrough_split(scene, repeat):
     return split
 
 
-def _split(result):
+def step_seconds(result):
     """A profiled render's seconds per step (``TIMED_STEPS``), "blender" (what is left of
     the wall time) and "wall"."""
     from csm_engine.render.result import TIMED_STEPS
@@ -283,7 +292,7 @@ def csm_split(scene, first=False):
     if first:
         engine.forget_final_render_meshes()
     result = render_once(scene, profile=True)
-    return _split(result), result.upload_bytes
+    return step_seconds(result), result.upload_bytes
 
 
 # -- viewport -----------------------------------------------------------------------------
@@ -393,8 +402,10 @@ def rss_mb():
         return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def compare_scene(name, quick, width, height, repeat, overrides=(), model_cache=None,
-                  dragon_variant="full"):
+def build_scene(name, quick, width, height, overrides=(), model_cache=None,
+                dragon_variant="full"):
+    """The benchmark's scene ``name`` (``SCENES``), ready to render at ``width`` x
+    ``height`` with ``overrides`` (``prepare_render``)."""
     log(f"scene '{name}': building")
     if name == "default":
         scene = open_scene("default")
@@ -412,6 +423,12 @@ def compare_scene(name, quick, width, height, repeat, overrides=(), model_cache=
                                   live=name.startswith("field-live"),
                                   distinct=name == "field-live-distinct")
     prepare_render(scene, width, height, overrides)
+    return scene
+
+
+def compare_scene(name, quick, width, height, repeat, overrides=(), model_cache=None,
+                  dragon_variant="full"):
+    scene = build_scene(name, quick, width, height, overrides, model_cache, dragon_variant)
     triangles = scene_triangles(scene)
     log(f"scene '{name}': {triangles} triangles, {width}x{height}")
     csm = time_engine(scene, "CSM", repeat, "CSM")

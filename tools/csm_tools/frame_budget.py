@@ -55,19 +55,37 @@ def minimal_pass_seconds(width, height, repeat=7):
     target = gpu.types.GPUTexture((width, height), format='RGBA32F')
     fb = gpu.types.GPUFrameBuffer(color_slots=(target,))
     batch = batch_for_shader(shader, 'TRIS', {"pos": ((-1, -1), (3, -1), (-1, 3))})
+    return _median_draw_seconds(fb, shader, batch, width, height, repeat,
+                                samplers={"surface": surface, "view_depth": view_depth})
+
+
+def _median_draw_seconds(fb, shader, batch, width, height, repeat, samplers=(),
+                         depth_test=False):
+    """Median seconds of ``repeat`` draws of ``batch`` into ``fb`` (cleared before each),
+    each waited for with a 1-pixel read, after one more that compiles llvmpipe's variant.
+    ``depth_test``: LESS_EQUAL, writing depth (``fb`` has a depth target)."""
+    import gpu
     times = []
     with fb.bind():
         gpu.state.viewport_set(0, 0, width, height)
-        gpu.state.depth_test_set('NONE')
+        gpu.state.depth_test_set('LESS_EQUAL' if depth_test else 'NONE')
+        gpu.state.depth_mask_set(depth_test)
         gpu.state.blend_set('NONE')
-        shader.bind()
-        shader.uniform_sampler("surface", surface)
-        shader.uniform_sampler("view_depth", view_depth)
-        for _ in range(repeat + 1):         # the first draw compiles llvmpipe's variant
+        for _ in range(repeat + 1):
+            if depth_test:
+                fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
+            shader.bind()
+            for name, texture in dict(samplers).items():
+                shader.uniform_sampler(name, texture)
             start = time.perf_counter()
             batch.draw(shader)
-            fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
+            if depth_test:
+                fb.read_depth(0, 0, 1, 1)
+            else:
+                fb.read_color(0, 0, 1, 1, 4, 0, 'FLOAT')
             times.append(time.perf_counter() - start)
+        gpu.state.depth_test_set('NONE')
+        gpu.state.depth_mask_set(False)
     return statistics.median(times[1:])
 
 
@@ -113,43 +131,31 @@ def _grid_shader(targets, varyings):
 GBUFFER_TARGETS = (('VEC4', 'RGBA32F'), ('VEC2', 'RG32F'))
 
 
-def triangle_floor(width, height, triangles, repeat=5):
+def triangle_floor(width, height, triangles, repeat=9):
     """Median seconds of drawing a grid of ``triangles`` small triangles over the screen
     (each waited for): {"depth only": a shadow map's draw, "two colour targets": with the
     G-buffer's targets written, "two colour targets and ten values": with its
-    interpolated values too}. No material, no overdraw: the least a pass of that many
-    visible triangles costs here."""
+    interpolated values too, "depth only, outside the view": the grid moved beside the
+    view, every triangle clipped away}. No material, no overdraw: the least a pass of
+    that many visible triangles costs here."""
     import gpu
+    import numpy as np
     from gpu_extras.batch import batch_for_shader
     positions, indices = _grid(triangles)
     depth = gpu.types.GPUTexture((width, height), format='DEPTH_COMPONENT32F')
+    beside = positions + np.array([3.0, 0.0, 0.0], dtype=np.float32)
     out = {}
-    for name, targets, varyings in (("depth only", (), False),
-                                     ("two colour targets", GBUFFER_TARGETS, False),
-                                     ("two colour targets and ten values", GBUFFER_TARGETS,
-                                      True)):
+    for name, targets, varyings, where in (
+            ("depth only", (), False, positions),
+            ("two colour targets", GBUFFER_TARGETS, False, positions),
+            ("two colour targets and ten values", GBUFFER_TARGETS, True, positions),
+            ("depth only, outside the view", (), False, beside)):
         shader = _grid_shader(targets, varyings)
-        batch = batch_for_shader(shader, 'TRIS', {"pos": positions}, indices=indices)
+        batch = batch_for_shader(shader, 'TRIS', {"pos": where}, indices=indices)
         colors = [gpu.types.GPUTexture((width, height), format=f) for _kind, f in targets]
         fb = gpu.types.GPUFrameBuffer(depth_slot=depth, color_slots=colors)
-        times = []
-        with fb.bind():
-            gpu.state.viewport_set(0, 0, width, height)
-            gpu.state.depth_test_set('LESS_EQUAL')
-            gpu.state.depth_mask_set(True)
-            for _ in range(repeat + 1):
-                if colors:
-                    fb.clear(color=(0.0, 0.0, 0.0, 0.0), depth=1.0)
-                else:
-                    fb.clear(depth=1.0)
-                shader.bind()
-                start = time.perf_counter()
-                batch.draw(shader)
-                fb.read_depth(0, 0, 1, 1)
-                times.append(time.perf_counter() - start)
-            gpu.state.depth_test_set('NONE')
-            gpu.state.depth_mask_set(False)
-        out[name] = statistics.median(times[1:])
+        out[name] = _median_draw_seconds(fb, shader, batch, width, height, repeat,
+                                         depth_test=True)
     return out
 
 

@@ -14,7 +14,8 @@ def test_frame_floor_prints_each_floor_in_milliseconds(tmp_path):
     assert set(found) == {"160x90, a minimal full-screen pass",
                           "5,000 triangles, depth only",
                           "5,000 triangles, two colour targets",
-                          "5,000 triangles, two colour targets and ten values"}, proc.stdout
+                          "5,000 triangles, two colour targets and ten values",
+                          "5,000 triangles, depth only, outside the view"}, proc.stdout
     assert all(float(v) > 0 for v in found.values())
 
 
