@@ -139,6 +139,21 @@ def start_cluster(distributed, args):
     return distributed.Client(cluster), cluster
 
 
+def close(client, cluster):
+    """Closes the client and, for a local cluster, its workers and scheduler, without the
+    traceback Dask logs when a worker's heartbeat is in flight as the scheduler goes: the
+    workers stop their heartbeats and drop that one message before anything closes."""
+    if cluster is not None:
+        try:
+            client.run(worker.stop_heartbeat, on_error="ignore")
+        except Exception:       # a broken cluster still closes below
+            pass
+        client.close()
+        cluster.close()
+    else:
+        client.close()
+
+
 def say(text):
     print(f"csm: {text}", flush=True)
 
@@ -183,9 +198,7 @@ def run(argv, prog):
                              f"{args.workers} local worker{'s' * (args.workers > 1)}")
             return _render_all(OnCluster(distributed, client), job, wanted, where, started)
         finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            close(client, cluster)
     except KeyboardInterrupt:
         print("csm: interrupted; the frames written so far are complete, and the same "
               "command renders the rest", file=sys.stderr)

@@ -4,7 +4,8 @@ them, with CSM, so meshes, shaders and render targets stay warm from frame to fr
 
 Owns ``FarmJob`` (what every frame of one run shares), ``FrameReport`` (what one frame
 task sends back), the per-process ``WorkerSession`` and the two task functions Dask calls
-by reference: ``scene_frames`` (the file's own frame range) and ``render_frame``. No Dask
+by reference: ``scene_frames`` (the file's own frame range) and ``render_frame``, and
+``stop_heartbeat``, which the farm runs on its local workers before it closes them. No Dask
 import here: a task is a plain function of plain data. bpy is imported when the first task
 runs, in the worker, never on the machine that only asks for frames.
 
@@ -15,6 +16,7 @@ cascades of the job's first frame in every worker (see ``WorkerSession.prepare``
 """
 
 import dataclasses
+import logging
 import os
 import threading
 import time
@@ -194,3 +196,16 @@ def render_frame(job, frame, path):
     if open_seconds:
         report.output = held.output + report.output
     return report
+
+
+HEARTBEAT_FAILURE = "Failed to communicate with scheduler during heartbeat."
+
+
+def stop_heartbeat(dask_worker):
+    """Run on every local worker (``Client.run``) just before the farm closes its cluster.
+    Stops the worker's heartbeat, and drops the one log record a heartbeat already in
+    flight would write when the scheduler closes under it: a traceback on the user's
+    terminal although nothing failed."""
+    dask_worker.periodic_callbacks["heartbeat"].stop()
+    logging.getLogger("distributed.worker").addFilter(
+        lambda record: record.getMessage() != HEARTBEAT_FAILURE)
