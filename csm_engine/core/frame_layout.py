@@ -365,22 +365,21 @@ SHADOW_TILE_LAYOUT = UniformLayout("ShadowTileData", (
                                          "3x3), giving a receiver plane's depth slope"),
 ))
 
-POINT_LIGHT_LAYOUT = UniformLayout("PointLightData", (
+# What point and spot lights both begin with (lights.glsl reads them alike).
+_LOCAL_LIGHT_FIELDS = (
     ("position", "vec3", "world position (scene units)"),
     ("radius", "float", "distance where the light ends (scene units): influence radius or "
                         "the linear falloff's zero"),
     ("color", "vec3", "PHYSICAL: radiant intensity (W/sr); LINEAR_RADIUS: irradiance at "
                       "the light (W/m^2)"),
+)
+
+POINT_LIGHT_LAYOUT = UniformLayout("PointLightData", _LOCAL_LIGHT_FIELDS + (
     ("falloff", "int", "FALLOFF_* with distance"),
     ("source_radius", "float", "Blender's Radius (scene units): soft shadows' penumbra"),
 ))
 
-SPOT_LIGHT_LAYOUT = UniformLayout("SpotLightData", (
-    ("position", "vec3", "world position (scene units)"),
-    ("radius", "float", "distance where the light ends (scene units): influence radius or "
-                        "the linear falloff's zero"),
-    ("color", "vec3", "PHYSICAL: radiant intensity (W/sr); LINEAR_RADIUS: irradiance at "
-                      "the light (W/m^2)"),
+SPOT_LIGHT_LAYOUT = UniformLayout("SpotLightData", _LOCAL_LIGHT_FIELDS + (
     ("shadow_tile", "int", "index into shadow_tiles, -1 when the spot casts no shadow"),
     ("direction", "vec3", "unit world direction the spot shines along"),
     ("cos_outer", "float", "cosine of the half cone angle: no light outside it"),

@@ -256,6 +256,25 @@ def rendered_shading_from_pie(space):
                 lambda: space.shading.type == 'RENDERED')
 
 
+HOLD_W_S = 0.5               # how long first person's W is held
+
+
+def fly_forward(what):
+    """Shift+F over the viewport starts the first-person camera (``what`` names it in the
+    wait), then W is held for HOLD_W_S and the viewport draws the view it flew to. A
+    scenario step (``yield from fly_forward(...)``)."""
+    mouse_to_viewport()
+    yield pause(0.2)
+    xdotool("key", "shift+f")
+    yield until(f"Shift+F started {what}", lambda: FIRST_PERSON["running"])
+    yield fresh_draws(1)
+    xdotool("keydown", "w")
+    yield pause(HOLD_W_S)
+    xdotool("keyup", "w")
+    yield pause(0.3)
+    yield fresh_draws(1)
+
+
 def mouse_to_viewport():
     x, y = viewport_centre_on_screen()
     xdotool("mousemove", x, y)

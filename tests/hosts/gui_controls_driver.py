@@ -51,18 +51,17 @@ import bpy
 # on sys.path).
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from gui_common import (  # noqa: E402 (after the path entry)
-    FIRST_PERSON, REPORT, STATE, click_in, count_view_draws, enable_listed_addon,
-    fresh_draws, menu_search, mouse_to_viewport, open_render_engine_menu, pause, record,
-    region_rect, rendered_shading_from_pie, run, screen_top, screenshot,
-    set_for_screenshots, sidebar, start, until, viewport_centre_on_screen,
-    watch_first_person, window_with, xdotool)
+    FIRST_PERSON, HOLD_W_S, REPORT, STATE, click_in, count_view_draws,
+    enable_listed_addon, fly_forward, fresh_draws, menu_search, mouse_to_viewport,
+    open_render_engine_menu, pause, record, region_rect, rendered_shading_from_pie, run,
+    screen_top, screenshot, set_for_screenshots, sidebar, start, until,
+    viewport_centre_on_screen, watch_first_person, window_with, xdotool)
 
 REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 OUT_DIR = os.path.abspath(sys.argv[sys.argv.index("--") + 1]) if "--" in sys.argv else os.getcwd()
 SCENE_FILE = os.path.join(REPO, "csm_engine", "data", "scenes", "default.json")
 
 SUN_TURN_DEGREES = 40.0
-HOLD_W_S = 0.5
 DRAG_PX = (120, 40)          # mouse drag while in first person: right and up, screen pixels
 CAMERA_ZOOM_OUT_CLICKS = 1  # wheel steps out after Home in camera view
 ADDONS_TAB_FROM_TOP_PX = 189  # Preferences: the "Add-ons" section in its left column
@@ -409,16 +408,7 @@ def scenario():
 
     # 7. First person: Shift+F over the viewport, hold W, drag the mouse, Enter.
     start = camera_state()
-    mouse_to_viewport()
-    yield pause(0.2)
-    xdotool("key", "shift+f")
-    yield until("Shift+F started the first-person camera", lambda: FIRST_PERSON["running"])
-    yield fresh_draws(1)
-    xdotool("keydown", "w")
-    yield pause(HOLD_W_S)
-    xdotool("keyup", "w")
-    yield pause(0.3)
-    yield fresh_draws(1)
+    yield from fly_forward("the first-person camera")
     after_w = camera_state()
     x, y = viewport_centre_on_screen()
     xdotool("mousedown", "1")
@@ -438,15 +428,7 @@ def scenario():
     after_enter = camera_state()
     shot = screenshot(7, "first_person")
     # Again, then Esc: the flight is cancelled and the camera goes back to where Enter left it.
-    yield pause(0.2)
-    xdotool("key", "shift+f")
-    yield until("Shift+F started the first-person camera again", lambda: FIRST_PERSON["running"])
-    yield fresh_draws(1)
-    xdotool("keydown", "w")
-    yield pause(HOLD_W_S)
-    xdotool("keyup", "w")
-    yield pause(0.3)
-    yield fresh_draws(1)
+    yield from fly_forward("the first-person camera again")
     before_esc = camera_state()
     xdotool("key", "Escape")
     yield until("Esc cancelled the first-person camera", lambda: not FIRST_PERSON["running"])

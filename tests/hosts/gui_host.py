@@ -3,8 +3,8 @@ inside it, and the pictures it leaves.
 
 Owns what ``test_gui_viewport.py``, ``test_gui_controls.py`` and
 ``test_gui_student_walk.py`` share: a fresh Xvfb, Blender's user folders without the splash
-screen, starting Blender with a driver (``gui_*driver.py``) and reading its JSON report,
-decoding screenshots, and scaling them for docs/.
+screen, the add-on's legacy zip, starting Blender with a driver (``gui_*driver.py``) and
+reading its JSON report, decoding screenshots, and scaling them for docs/.
 """
 
 import json
@@ -15,6 +15,9 @@ import subprocess
 import time
 
 import pytest
+
+from tests.conftest import REPO
+from tests.hosts.test_packaging import _manifest, _run_build
 
 SCREEN_SIZE = (1600, 900)
 PREFERENCES_TIMEOUT_S = 120
@@ -84,6 +87,25 @@ def save_preferences_without_splash(blender, env, cwd):
     if done.returncode != 0 or not os.path.isfile(prefs):
         fail(f"could not save Blender preferences without the splash screen:\n"
               f"{(done.stdout + done.stderr)[-3000:]}")
+
+
+def fresh_blender(hosts, display, tmp_path_factory, name):
+    """(blender, root, out_dir, env, legacy_zip) for one GUI test module: Blender 3.4 with
+    fresh user folders whose preferences skip the splash screen, an empty folder for the
+    driver's screenshots and report, and the add-on's legacy zip built from this tree."""
+    if shutil.which("xdotool") is None:
+        fail("xdotool not found: apt-get install xdotool")
+    blender = hosts.blender_binary()
+    root = tmp_path_factory.mktemp(name)
+    out_dir = root / "out"
+    out_dir.mkdir()
+    env = blender_env(hosts, root, display)
+    save_preferences_without_splash(blender, env, str(root))
+    built = _run_build(REPO, str(root / "dist"))
+    if built.returncode != 0:
+        fail(f"tools/build.py failed:\n{built.stdout}{built.stderr}")
+    legacy = root / "dist" / f"csm_engine-{_manifest()['version']}-legacy.zip"
+    return blender, root, out_dir, env, legacy
 
 
 def run_driver(blender, driver, args, env, root, report_name, timeout_s):

@@ -35,15 +35,14 @@ import bpy
 # on sys.path).
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from gui_common import (  # noqa: E402 (after the path entry)
-    FIRST_PERSON, STATE, click_in, count_view_draws, enable_listed_addon, fresh_draws,
-    mouse_to_viewport, open_render_engine_menu, pause, record, rendered_shading_from_pie,
-    run, screen_height, screen_top, screenshot, set_for_screenshots, sidebar, start, until,
-    watch_first_person, window_with, xdotool)
+    FIRST_PERSON, STATE, click_in, count_view_draws, enable_listed_addon, fly_forward,
+    fresh_draws, mouse_to_viewport, open_render_engine_menu, pause, record,
+    rendered_shading_from_pie, run, screen_height, screen_top, screenshot,
+    set_for_screenshots, sidebar, start, until, watch_first_person, window_with, xdotool)
 
 ARGS = sys.argv[sys.argv.index("--") + 1:]
 OUT_DIR, ADDON_ZIP, SHADER_COPY = (os.path.abspath(a) for a in ARGS[:3])
 
-HOLD_W_S = 0.5
 BLEND_BAND_M = 20
 # Where things are drawn in the fixed 1600x900 window at the default UI scale (measured on
 # the screenshots, as in gui_controls_driver.py).
@@ -252,16 +251,8 @@ def walk():
 
     # 6. First person: Shift+F, W held, then Esc puts the camera back.
     start = camera_matrix()
-    mouse_to_viewport()
-    yield pause(0.2)
-    xdotool("key", "shift+f")
-    yield until("Shift+F started first person", lambda: FIRST_PERSON["running"])
+    yield from fly_forward("first person")
     yield fresh_draws(1)
-    xdotool("keydown", "w")
-    yield pause(HOLD_W_S)
-    xdotool("keyup", "w")
-    yield pause(0.3)
-    yield fresh_draws(2)
     flying = camera_matrix()
     flying_shot = screenshot(6, "flying")
     xdotool("key", "Escape")

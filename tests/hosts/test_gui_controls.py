@@ -16,16 +16,13 @@ and Blender, then checks the records and the screenshots' pixels.
 """
 
 import os
-import shutil
 import zipfile
 
 import numpy as np
 import pytest
 
 from tests.hosts.gui_host import (  # the X server and Blender set-up
-    blender_env, fail as _fail, load_png, run_driver, save_for_docs,
-    save_preferences_without_splash, x_display)
-from tests.hosts.test_packaging import _manifest, _run_build
+    fresh_blender, load_png, run_driver, save_for_docs, x_display)
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
 
@@ -39,19 +36,9 @@ BLENDER_TIMEOUT_S = 200
 
 @pytest.fixture(scope="module")
 def run(x_display, hosts, tmp_path_factory):
-    if shutil.which("xdotool") is None:
-        _fail("xdotool not found: apt-get install xdotool")
-    blender = hosts.blender_binary()
-    root = tmp_path_factory.mktemp("gui_controls")
-    out_dir = root / "out"
-    out_dir.mkdir()
-    env = blender_env(hosts, root, x_display)
-    save_preferences_without_splash(blender, env, str(root))
+    blender, root, out_dir, env, legacy = fresh_blender(hosts, x_display, tmp_path_factory,
+                                                       "gui_controls")
     # Installed, not enabled: the driver enables it in Preferences > Add-ons with clicks.
-    dist = root / "dist"
-    built = _run_build(REPO, str(dist))
-    assert built.returncode == 0, f"tools/build.py failed:\n{built.stdout}{built.stderr}"
-    legacy = dist / f"csm_engine-{_manifest()['version']}-legacy.zip"
     addons = os.path.join(env["BLENDER_USER_SCRIPTS"], "addons")
     with zipfile.ZipFile(legacy) as archive:
         archive.extractall(addons)

@@ -18,9 +18,7 @@ import pytest
 
 from tests.conftest import REPO
 from tests.hosts.gui_host import (  # the X server and Blender set-up
-    blender_env, fail as _fail, load_png, run_driver, save_for_docs,
-    save_preferences_without_splash, x_display)
-from tests.hosts.test_packaging import _manifest, _run_build
+    fresh_blender, load_png, run_driver, save_for_docs, x_display)
 
 pytestmark = [pytest.mark.gui, pytest.mark.slow]
 
@@ -32,18 +30,8 @@ _ = x_display
 
 @pytest.fixture(scope="module")
 def walk(x_display, hosts, tmp_path_factory):
-    if shutil.which("xdotool") is None:
-        _fail("xdotool not found: apt-get install xdotool")
-    blender = hosts.blender_binary()
-    root = tmp_path_factory.mktemp("gui_walk")
-    out_dir = root / "out"
-    out_dir.mkdir()
-    env = blender_env(hosts, root, x_display)
-    save_preferences_without_splash(blender, env, str(root))
-    dist = root / "dist"
-    built = _run_build(REPO, str(dist))
-    assert built.returncode == 0, f"tools/build.py failed:\n{built.stdout}{built.stderr}"
-    legacy = dist / f"csm_engine-{_manifest()['version']}-legacy.zip"
+    blender, root, out_dir, env, legacy = fresh_blender(hosts, x_display, tmp_path_factory,
+                                                       "gui_walk")
     # The student's copy of the shaders (as in their checkout), for the Shader Folder.
     shader_copy = root / "my_shaders"
     shutil.copytree(os.path.join(REPO, "shaders"), shader_copy)

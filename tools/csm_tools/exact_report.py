@@ -229,7 +229,7 @@ def run(argv, prog=PROG):
     if args.write:
         import bpy
         body = (f"Measured {datetime.date.today().isoformat()} at {width}x{height} on "
-                f"{gt._machine()}, Blender {bpy.app.version_string}, in "
+                f"{report_io.machine()}, Blender {bpy.app.version_string}, in "
                 f"{(time.monotonic() - started) / 60:.1f} minutes:\n\n"
                 f"```sh\nPYTHONPATH=.:tools .venv/bin/python -m csm_tools.exact_report "
                 f"--resolution {width}x{height} --write docs/ground-truth.md\n```\n\n"

@@ -51,11 +51,9 @@ imported only inside the functions that render.
 import argparse
 import contextlib
 import dataclasses
-import datetime
 import json
 import math
 import os
-import platform
 import sys
 import tempfile
 import time
@@ -1066,16 +1064,6 @@ def run(argv, prog=PROG):
 
 # ------------------------------------------------------------------------ --all suite
 
-def _machine():
-    text = f"{os.cpu_count()} cores, {platform.system()} {platform.machine()}"
-    try:
-        import gpu
-        text += f", {gpu.platform.renderer_get()}"
-    except Exception:      # no GPU context: the renderer is unknown, the rest still holds
-        pass
-    return text
-
-
 def run_all(args, argv, prog):
     """The documented suite: each scene in hard mode at --resolution and in soft mode at
     each angle at --soft-resolution; heat maps, the JSON and the generated tables."""
@@ -1130,11 +1118,9 @@ def run_all(args, argv, prog):
 def _write_suite(args, argv, prog, markdown, started, skipped, runs):
     """The tables and the JSON so far (after every run, so a long suite stopped half-way
     still leaves its numbers)."""
-    import bpy
-    report = dict(command=" ".join([prog] + list(argv)),
-                  date=datetime.date.today().isoformat(), blender=bpy.app.version_string,
-                  machine=_machine(), runtime_s=time.monotonic() - started,
-                  overrides=list(args.overrides), skipped=skipped, runs=runs)
+    report = report_io.run_facts(prog, argv, runtime_s=time.monotonic() - started,
+                                 overrides=list(args.overrides), skipped=skipped,
+                                 runs=runs)
     report_io.write_section(markdown, BEGIN, END, build_markdown(report),
                             title="Ground truth")
     if args.json:

@@ -20,7 +20,6 @@ its ``BEGIN``/``END`` markers (``report_io.write_section``), the prose around it
 """
 
 import argparse
-import datetime
 import math
 import os
 import tempfile
@@ -268,7 +267,6 @@ def build_parser(prog=PROG):
 
 def run(argv, prog=PROG):
     args = build_parser(prog).parse_args(argv)
-    import bpy
     width, height = parse_resolution(
         args.resolution or (QUICK_RESOLUTION if args.quick else DEFAULT_RESOLUTION))
     samples = args.samples or (4 if args.quick else 32)
@@ -288,9 +286,8 @@ def run(argv, prog=PROG):
             engines[engine] = {"seconds": seconds, "far_spread": far_rows_spread(linear)}
             print(f"[materials] {engine}: {seconds:.2f} s, far-floor spread "
                   f"{engines[engine]['far_spread']:.4f}", flush=True)
-    report = dict(command=" ".join([prog] + list(argv)),
-                  date=datetime.date.today().isoformat(), blender=bpy.app.version_string,
-                  resolution=f"{width}x{height}", samples=samples, engines=engines)
+    report = report_io.run_facts(prog, argv, resolution=f"{width}x{height}",
+                                 samples=samples, engines=engines)
     markdown = os.path.join(out_dir, "materials.md")
     report_io.write_section(markdown, BEGIN, END, build_markdown(report),
                             title="Materials")

@@ -32,10 +32,8 @@ the numbers in ``docs``.
 """
 
 import argparse
-import datetime
 import json
 import os
-import platform
 import tempfile
 import time
 
@@ -341,16 +339,6 @@ def build_markdown(report, points, sweeps, scenes, defaults, worst, acne_scene, 
 
 # ------------------------------------------------------------------------------ run
 
-def _machine():
-    text = f"{os.cpu_count()} cores, {platform.system()} {platform.machine()}"
-    try:
-        import gpu
-        text += f", {gpu.platform.renderer_get()}"
-    except Exception:      # no GPU context: the renderer is unknown, the rest still holds
-        pass
-    return text
-
-
 def build_parser(prog=PROG):
     parser = argparse.ArgumentParser(
         prog=prog,
@@ -467,13 +455,10 @@ def run(argv, prog=PROG):
         print("[quality] matplotlib is not installed: plots skipped (pip install matplotlib); "
               "numbers, heat maps and the markdown tables are written", flush=True)
 
-    command = " ".join([prog] + list(argv))
-    report = dict(
-        command=command, date=datetime.date.today().isoformat(),
-        resolution=f"{width}x{height}", points=len(points), renders=renders,
-        runtime_s=time.monotonic() - started, blender=bpy.app.version_string,
-        machine=_machine(),
-        scenes=list(scenes), defaults=defaults, acne_scene=acne_scene)
+    report = report_io.run_facts(
+        prog, argv, resolution=f"{width}x{height}", points=len(points), renders=renders,
+        runtime_s=time.monotonic() - started, scenes=list(scenes), defaults=defaults,
+        acne_scene=acne_scene)
     markdown_path = os.path.join(out_dir, "shadow-acne.md")
     report_io.write_section(markdown_path, BEGIN, END, build_markdown(
         report, points, sweeps, scenes, defaults, worst, acne_scene, bool(plotted)),

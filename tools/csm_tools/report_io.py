@@ -3,9 +3,13 @@
 Owns the one way a tool rewrites its part of a hand-written page (the text between a
 ``BEGIN`` and an ``END`` marker; the prose around them stays) and the one plain-numpy PNG
 writer and reader (8-bit, non-interlaced, no imaging library), so the tools and their tests
-agree on the format. No bpy.
+agree on the format, and what every generated table says of the run that made it
+(``run_facts``). bpy and gpu are imported only there, for Blender's version and renderer.
 """
 
+import datetime
+import os
+import platform
 import struct
 import zlib
 
@@ -18,6 +22,27 @@ _PNG_CHANNELS = {v: k for k, v in _PNG_COLOR_TYPES.items()}
 
 class ReportError(Exception):
     """A page or image cannot be written or read; ``str()`` is one line naming the file."""
+
+
+# -- the run behind a table ----------------------------------------------------------------
+def machine():
+    """Cores, system and, once Blender has made a GPU context, the OpenGL renderer."""
+    text = f"{os.cpu_count()} cores, {platform.system()} {platform.machine()}"
+    try:
+        import gpu
+        text += f", {gpu.platform.renderer_get()}"
+    except Exception:      # no GPU context: the renderer is unknown, the rest still holds
+        pass
+    return text
+
+
+def run_facts(prog, argv, **more):
+    """The command, date, machine and Blender version a generated table states, plus
+    ``more``."""
+    import bpy
+    return dict(command=" ".join([prog] + list(argv)),
+                date=datetime.date.today().isoformat(), machine=machine(),
+                blender=bpy.app.version_string, **more)
 
 
 # -- generated markdown sections ----------------------------------------------------------

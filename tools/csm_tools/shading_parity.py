@@ -27,9 +27,7 @@ metals, coat, sheen, emission, and the bundled textured glTF).
 """
 
 import argparse
-import datetime
 import os
-import platform
 import tempfile
 import time
 
@@ -361,11 +359,7 @@ def run(argv, prog=PROG):
               f"{rows['CSM']['p90']:.4f} brightness {rows['CSM']['ratio']:.3f} | EEVEE mean "
               f"{rows['EEVEE']['mean']:.4f} p90 {rows['EEVEE']['p90']:.4f} brightness "
               f"{rows['EEVEE']['ratio']:.3f} | {rows['CSM']['pixels']} px", flush=True)
-    report = dict(command=" ".join([prog] + list(argv)),
-                  date=datetime.date.today().isoformat(),
-                  machine=f"{platform.machine()}, {os.cpu_count()} cores, Mesa llvmpipe",
-                  blender=bpy.app.version_string, resolution=f"{width}x{height}",
-                  scenes=scenes)
+    report = report_io.run_facts(prog, argv, resolution=f"{width}x{height}", scenes=scenes)
     markdown = os.path.join(out_dir, "shading-parity.md")
     report_io.write_section(markdown, BEGIN, END, build_markdown(report),
                             title="Shading parity")
