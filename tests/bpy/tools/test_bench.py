@@ -7,7 +7,13 @@ that must not disturb the other tests' shared bpy state.
 """
 import json
 
+import pytest
+
 from tests.bpy.tools.tool_helpers import run_module
+
+
+# Speed is measured and published on the main host (bpy 5.0) only.
+pytestmark = pytest.mark.benchmark
 
 
 def test_quick_benchmark_reports_both_engines_and_a_free_camera_redraw(tmp_path):

@@ -4,8 +4,14 @@ Times are not asserted (machines vary)."""
 import json
 import os
 
+import pytest
+
 from csm_engine.core import scene_format
 from tests.bpy.tools.tool_helpers import run_module
+
+
+# Speed is measured and published on the main host (bpy 5.0) only.
+pytestmark = pytest.mark.benchmark
 
 
 def test_copies_scenes_reference_each_file_as_asked(tmp_path):

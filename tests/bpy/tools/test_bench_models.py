@@ -23,6 +23,10 @@ from tests.bpy.bpy_helpers import render_scene
 from tests.bpy.tools.tool_helpers import run_module
 from csm_tools import bench_models
 
+# Speed is measured and published on the main host (bpy 5.0) only.
+pytestmark = pytest.mark.benchmark
+
+
 # A 1 x 3 x 1 m tower in OBJ's Y-up convention: 12 triangles.
 BOX_OBJ = """mtllib samurai_monastry.mtl
 o tower

@@ -3,7 +3,13 @@ on this machine (the floors docs/benchmarks.md sets against EEVEE's frame over 2
 are not asserted (machines vary)."""
 import re
 
+import pytest
+
 from tests.bpy.tools.tool_helpers import run_module
+
+
+# Speed is measured and published on the main host (bpy 5.0) only.
+pytestmark = pytest.mark.benchmark
 
 
 def test_frame_floor_prints_each_floor_in_milliseconds(tmp_path):

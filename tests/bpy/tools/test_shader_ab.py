@@ -3,8 +3,14 @@ by frame, and prints each pass's median for both and their ratio. Times are not 
 (machines vary)."""
 import re
 
+import pytest
+
 from tests.bpy.tools.tool_helpers import run_module
 from tests.conftest import REPO
+
+
+# Speed is measured and published on the main host (bpy 5.0) only.
+pytestmark = pytest.mark.benchmark
 
 
 def test_two_folders_are_timed_pass_by_pass(tmp_path):
