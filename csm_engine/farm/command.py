@@ -148,10 +148,9 @@ def close(client, cluster):
             client.run(worker.stop_heartbeat, on_error="ignore")
         except Exception:       # a broken cluster still closes below
             pass
-        client.close()
+    client.close()
+    if cluster is not None:
         cluster.close()
-    else:
-        client.close()
 
 
 def say(text):

@@ -3,8 +3,8 @@ the job's .blend once and renders the frames the scheduler hands it, in the orde
 them, with CSM, so meshes, shaders and render targets stay warm from frame to frame.
 
 Owns ``FarmJob`` (what every frame of one run shares), ``FrameReport`` (what one frame
-task sends back), the per-process ``WorkerSession`` and the two task functions Dask calls
-by reference: ``scene_frames`` (the file's own frame range) and ``render_frame``, and
+task sends back), the per-process ``WorkerSession`` and the functions Dask calls by
+reference: the tasks ``scene_frames`` (the file's own frame range) and ``render_frame``, and
 ``stop_heartbeat``, which the farm runs on its local workers before it closes them. No Dask
 import here: a task is a plain function of plain data. bpy is imported when the first task
 runs, in the worker, never on the machine that only asks for frames.
