@@ -7,7 +7,8 @@ and render pass names (spelled out in 5.0, short before); the Principled BSDF's 
 before 4.0) and its renamed specular and emission inputs; material alpha, shadow and
 culling settings (``blend_method``/``shadow_method`` up to 4.1, ``surface_render_method``/
 ``use_transparent_shadow`` from 4.2); MikkTSpace tangents; the glTF importer of 3.4/3.5 that needs
-``np.bool``; node groups' sockets (``interface`` from 4.0); an object's Shadow Terminator
+``np.bool``; node groups' sockets (``interface`` from 4.0); whether a material or World
+uses its nodes (always from 5.0); an object's Shadow Terminator
 Geometry Offset (Object in 5.0, the Cycles
 add-on's ``object.cycles`` before); and the exit that pip bpy 4.2 needs to keep a
 process's exit code. Callers ask
@@ -57,6 +58,17 @@ def material_shadow_mode(material, alpha_mode):
         return alpha_mode if material.use_transparent_shadow else 'OPAQUE'
     method = getattr(material, "shadow_method", 'OPAQUE')
     return method if method in {'NONE', 'OPAQUE', 'CLIP', 'HASHED'} else 'OPAQUE'
+
+
+def shading_nodes(id_block):
+    """The node tree a material or World renders with, or None when it renders without
+    nodes (Use Nodes off, before 5.0).
+
+    NOTE: 5.0 always renders with nodes (files from before are converted on load) and
+    deprecates ``use_nodes``, which reads True there, so it is read only before 5.0."""
+    if bpy.app.version < (5, 0, 0) and not id_block.use_nodes:
+        return None
+    return id_block.node_tree
 
 
 def material_backface_culling_shadow(material):

@@ -126,7 +126,7 @@ def material_info(material):
     info.base_color = tuple(material.diffuse_color)
     info.backface_culling = bool(getattr(material, "use_backface_culling", False))
     info.backface_culling_shadow = compat.material_backface_culling_shadow(material)
-    if not (material.use_nodes and material.node_tree):
+    if compat.shading_nodes(material) is None:
         info.roughness = float(getattr(material, "roughness", 0.5))
         info.metallic = float(getattr(material, "metallic", 0.0))
         return info

@@ -119,9 +119,10 @@ def _world_light(world, warnings=None):
     Texture feeds the Background, as spherical harmonics (``environment_sh``, times the
     Background strength; else None)."""
     color = _world_color(world, warnings)
-    if world is None or not (world.use_nodes and world.node_tree):
+    tree = None if world is None else compat.shading_nodes(world)
+    if tree is None:
         return color, None
-    for node in world.node_tree.nodes:
+    for node in tree.nodes:
         if node.type == 'BACKGROUND' and node.inputs[0].is_linked:
             source = node.inputs[0].links[0].from_node
             image = getattr(source, "image", None)
@@ -141,8 +142,9 @@ def _world_color(world, warnings=None):
     setup), the World's viewport colour, and a warning saying so."""
     if world is None:
         return np.zeros(3)
-    if world.use_nodes and world.node_tree:
-        for node in world.node_tree.nodes:
+    tree = compat.shading_nodes(world)
+    if tree is not None:
+        for node in tree.nodes:
             if node.type == 'BACKGROUND':
                 color = node.inputs[0]
                 strength = node.inputs[1].default_value

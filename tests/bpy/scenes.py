@@ -70,8 +70,10 @@ def set_world_color(scene, rgb):
     world = scene.world or bpy.data.worlds.new("World")
     scene.world = world
     world.color = rgb
-    if world.use_nodes and world.node_tree:
-        for node in world.node_tree.nodes:
+    from csm_engine.blender.compat import shading_nodes
+    tree = shading_nodes(world)
+    if tree is not None:
+        for node in tree.nodes:
             if node.type == 'BACKGROUND':
                 node.inputs[0].default_value = (*rgb, 1.0)
                 node.inputs[1].default_value = 1.0

@@ -613,3 +613,39 @@ def test_coat_adds_its_layer_and_switched_off_leaves_nothing_behind(empty_scene)
     bsdf.inputs["Coat Weight"].default_value = 0.0
     color = render_scene(scene, 120, 60)["combined"][..., :3]
     assert np.allclose(color[20:40, 20:40], color[20:40, 80:100], atol=1e-4)
+
+
+def test_materials_and_worlds_are_read_through_the_nodes_blender_renders_with():
+    """Before 5.0 Use Nodes can be off (then the material's viewport colour is what
+    renders); 5.0 always renders nodes and warns that ``use_nodes`` is going away, so the
+    add-on must not read it there."""
+    import warnings
+
+    from csm_engine.blender import compat, materials, snapshot
+    material = bpy.data.materials.new("plain")
+    material.diffuse_color = (0.8, 0.1, 0.1, 1.0)
+    world = bpy.data.worlds.new("plain")
+    world.color = (0.2, 0.3, 0.4)
+    try:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            info = materials.material_info(material)
+            sky = snapshot._world_color(world)
+            material_tree = compat.shading_nodes(material)
+            world_tree = compat.shading_nodes(world)
+        assert not [str(w.message) for w in caught if w.category is DeprecationWarning]
+        if bpy.app.version < (5, 0, 0):
+            # New materials and worlds have Use Nodes off: their viewport colours render.
+            assert material_tree is None and world_tree is None
+            assert info.base_color == pytest.approx((0.8, 0.1, 0.1, 1.0))
+            assert sky == pytest.approx((0.2, 0.3, 0.4))
+        else:
+            assert material_tree is material.node_tree is not None
+            principled = next(n for n in material_tree.nodes if n.type == 'BSDF_PRINCIPLED')
+            assert info.base_color[:3] == pytest.approx(
+                tuple(principled.inputs["Base Color"].default_value)[:3])
+            background = next(n for n in world_tree.nodes if n.type == 'BACKGROUND')
+            assert sky == pytest.approx(tuple(background.inputs[0].default_value)[:3])
+    finally:
+        bpy.data.materials.remove(material)
+        bpy.data.worlds.remove(world)
