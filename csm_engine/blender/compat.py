@@ -71,6 +71,14 @@ def shading_nodes(id_block):
     return id_block.node_tree
 
 
+def enable_shading_nodes(id_block):
+    """Use Nodes on for a material or World, as a script that builds one sets it; returns
+    its node tree. (5.0 always uses nodes: nothing to set there.)"""
+    if bpy.app.version < (5, 0, 0):
+        id_block.use_nodes = True
+    return id_block.node_tree
+
+
 def material_backface_culling_shadow(material):
     """Backface culling in the shadow pass: 4.2+'s own setting; before, shadows of every
     material were drawn from both sides."""

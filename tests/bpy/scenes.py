@@ -18,6 +18,8 @@ import pytest
 from mathutils import Vector
 from mathutils.bvhtree import BVHTree
 
+from csm_engine.blender.compat import enable_shading_nodes, shading_nodes
+
 COURSE_SUN = Vector((0.3, 0.7, -0.6))   # the course's (0.3, -0.6, -0.7), Y-up -> Z-up
 
 
@@ -70,7 +72,6 @@ def set_world_color(scene, rgb):
     world = scene.world or bpy.data.worlds.new("World")
     scene.world = world
     world.color = rgb
-    from csm_engine.blender.compat import shading_nodes
     tree = shading_nodes(world)
     if tree is not None:
         for node in tree.nodes:
@@ -82,7 +83,7 @@ def set_world_color(scene, rgb):
 def principled(name, base=(0.8, 0.8, 0.8), roughness=0.5):
     """A new material whose Principled BSDF has this base colour and roughness."""
     material = bpy.data.materials.new(name)
-    material.use_nodes = True
+    enable_shading_nodes(material)
     bsdf = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
     bsdf.inputs["Base Color"].default_value = (*base, 1.0)
     bsdf.inputs["Roughness"].default_value = roughness

@@ -29,6 +29,7 @@ import numpy as np
 
 from csm_engine.blender.cli import (CLIError, EXIT_RENDER, ensure_registered,
                                     parse_resolution, run_reporting_errors)
+from csm_engine.blender.compat import enable_shading_nodes, shading_nodes
 
 from . import report_io
 
@@ -76,7 +77,7 @@ def _image(name, rgba, non_color=False):
 def _principled(name, base, roughness=0.5, **inputs):
     import bpy
     material = bpy.data.materials.new(name)
-    material.use_nodes = True
+    enable_shading_nodes(material)
     bsdf = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
     bsdf.inputs["Base Color"].default_value = (*base, 1.0)
     bsdf.inputs["Roughness"].default_value = roughness
@@ -156,8 +157,9 @@ def build_scene():
     world = bpy.data.worlds.new("World")
     scene.world = world
     world.color = (0.05, 0.06, 0.08)
-    if world.use_nodes and world.node_tree:
-        for node in world.node_tree.nodes:
+    tree = shading_nodes(world)
+    if tree is not None:
+        for node in tree.nodes:
             if node.type == 'BACKGROUND':
                 node.inputs[0].default_value = (0.05, 0.06, 0.08, 1.0)
 

@@ -35,6 +35,7 @@ import numpy as np
 
 from csm_engine.blender.cli import (CLIError, EXIT_RENDER, EXIT_SCENE, open_scene,
                                     parse_resolution, run_reporting_errors)
+from csm_engine.blender.compat import enable_shading_nodes
 
 from . import report_io
 from .bench_scenes import add_camera
@@ -59,7 +60,7 @@ def _principled(name, base=(0.8, 0.8, 0.8), roughness=0.5, **inputs):
     ``|`` between the names Blender versions use, to values)."""
     import bpy
     material = bpy.data.materials.new(name)
-    material.use_nodes = True
+    enable_shading_nodes(material)
     bsdf = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
     bsdf.inputs["Base Color"].default_value = (*base, 1.0)
     bsdf.inputs["Roughness"].default_value = roughness

@@ -35,7 +35,10 @@ def _edge_scene(scene):
     quad.rotation_euler = (0.0, 0.0, math.radians(EDGE_ANGLE_DEG))
     material = bpy.data.materials.new("white")
     material.diffuse_color = (ALBEDO, ALBEDO, ALBEDO, 1.0)
-    material.use_nodes = False
+    if bpy.app.version < (5, 0, 0):
+        # The viewport colour renders. 5.0 always renders nodes: its new material's
+        # Principled BSDF has the same 0.8 base colour.
+        material.use_nodes = False
     mesh.materials.append(material)
     sun = add_sun((0.0, 0.0, -1.0))
     sun.data.energy = math.pi

@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 
 from csm_engine.blender import engine
+from csm_engine.blender.compat import enable_shading_nodes
 from tests.bpy.bpy_helpers import load_png, render_scene
 from tests.bpy.scenes import add_box, add_camera, add_ground, add_sun, set_world_color
 
@@ -70,7 +71,7 @@ def test_an_environment_texture_lights_by_the_irradiance_of_the_normal(empty_sce
     scene = empty_scene
     ground = add_ground(20)
     material = bpy.data.materials.new("diffuse")
-    material.use_nodes = True
+    enable_shading_nodes(material)
     bsdf = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
     next(bsdf.inputs[n] for n in ("Specular IOR Level", "Specular")
          if bsdf.inputs.get(n)).default_value = 0.0
@@ -84,7 +85,7 @@ def test_an_environment_texture_lights_by_the_irradiance_of_the_normal(empty_sce
     pixels[:16] = (0.0, 0.0, 1.0, 1.0)
     image.pixels.foreach_set(pixels.ravel())
     world = bpy.data.worlds.new("env")
-    world.use_nodes = True
+    enable_shading_nodes(world)
     nodes = world.node_tree.nodes
     environment = nodes.new("ShaderNodeTexEnvironment")
     environment.image = image

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from csm_engine.blender import engine
+from csm_engine.blender.compat import enable_shading_nodes
 from csm_engine.render import pipeline
 from tests.bpy.bpy_helpers import (
     cube_on_plane, pipeline_drawing, render_result, viewport_frame)
@@ -25,7 +26,7 @@ def _scene(empty_scene):
     cube, sun = cube_on_plane(scene)
     material = bpy.data.materials.new("cube")
     if material.node_tree is None:       # before 5.0 a new material has no nodes
-        material.use_nodes = True
+        enable_shading_nodes(material)
     _set_colour(material, (0.8, 0.2, 0.2, 1.0))
     cube.data.materials.append(material)
     # A wall whose back faces the camera: gone when back faces are culled.

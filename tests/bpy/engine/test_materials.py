@@ -12,6 +12,7 @@ import bpy
 import numpy as np
 import pytest
 
+from csm_engine.blender.compat import enable_shading_nodes
 from tests.bpy.bpy_helpers import render_result, render_scene
 from tests.bpy.scenes import (add_box, add_camera, add_ground, add_sun, render_eevee,
                               set_world_color)
@@ -34,7 +35,7 @@ def _save(name, rgb):
 
 def principled_material(name, base=(0.8, 0.8, 0.8), roughness=0.5, **inputs):
     material = bpy.data.materials.new(name)
-    material.use_nodes = True
+    enable_shading_nodes(material)
     bsdf = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
     bsdf.inputs["Base Color"].default_value = (*base, 1.0)
     bsdf.inputs["Roughness"].default_value = roughness
@@ -210,7 +211,7 @@ def test_emission_shows_without_lights_and_in_full_shadow(empty_scene):
                                           "Emission Strength": 2.0})
     add_plane(2.0, (-1.5, 0, 0), glowing)
     emission_only = bpy.data.materials.new("emission shader")
-    emission_only.use_nodes = True
+    enable_shading_nodes(emission_only)
     tree = emission_only.node_tree
     for node in list(tree.nodes):
         if node.type != 'OUTPUT_MATERIAL':

@@ -6,12 +6,13 @@ import bpy
 import numpy as np
 import pytest
 
+from csm_engine.blender.compat import enable_shading_nodes
 from tests.bpy.bpy_helpers import render_scene
 from tests.bpy.scenes import add_box, add_camera, add_ground, add_sun, set_world_color
 
 
 def _principled(material):
-    material.use_nodes = True
+    enable_shading_nodes(material)
     return next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
 
 
@@ -126,7 +127,7 @@ def test_world_colour_is_background_and_ambient(empty_scene):
     scene = empty_scene
     ground = add_ground(20)
     diffuse = bpy.data.materials.new("diffuse")
-    diffuse.use_nodes = True
+    enable_shading_nodes(diffuse)
     bsdf = next(n for n in diffuse.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
     next(bsdf.inputs[n] for n in ("Specular IOR Level", "Specular")
          if bsdf.inputs.get(n)).default_value = 0.0

@@ -11,12 +11,10 @@ lights away from silhouettes: CSM's mean relative error must be at most EEVEE's 
 2 % (the Blinn-Phong BRDF it replaced was at 24 % here, and at 2 % to 28 % on the scenes
 of docs/shading-parity.md).
 """
-import math
-
 import bpy
 import numpy as np
-import pytest
 
+from csm_engine.blender.compat import enable_shading_nodes
 from tests.bpy.scenes import add_camera, add_sun, blender_render, eevee_engine_id
 
 WIDTH, HEIGHT = 128, 72
@@ -26,7 +24,7 @@ MAX_CSM_ERROR = 0.02
 
 def _principled(name, base, roughness, **inputs):
     material = bpy.data.materials.new(name)
-    material.use_nodes = True
+    enable_shading_nodes(material)
     bsdf = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
     bsdf.inputs["Base Color"].default_value = (*base, 1.0)
     bsdf.inputs["Roughness"].default_value = roughness

@@ -11,6 +11,7 @@ import bpy
 import numpy as np
 
 from csm_engine.blender import engine, mesh_cache
+from csm_engine.blender.compat import enable_shading_nodes
 from csm_engine.render import pipeline
 from tests.bpy.bpy_helpers import pipeline_drawing, render_scene, viewport_frame
 
@@ -30,7 +31,7 @@ def _scene(empty_scene):
     image = bpy.data.images.new("checker", 4, 4)
     image.pixels.foreach_set(np.full(4 * 4 * 4, 0.8, dtype=np.float32))
     material = bpy.data.materials.new("ground")
-    material.use_nodes = True
+    enable_shading_nodes(material)
     nodes = material.node_tree.nodes
     texture = nodes.new("ShaderNodeTexImage")
     texture.image = image

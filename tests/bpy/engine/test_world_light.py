@@ -12,6 +12,7 @@ within 2 %. The average colour (what a uniform World gives) misses by 20 % or mo
 import bpy
 import numpy as np
 
+from csm_engine.blender.compat import enable_shading_nodes
 from tests.bpy.bpy_helpers import render_scene
 from tests.bpy.scenes import add_camera
 
@@ -53,14 +54,14 @@ def test_environment_lights_each_normal_by_its_irradiance(empty_scene):
     image.pixels.foreach_set(rgba.astype(np.float32).ravel())
     world = bpy.data.worlds.new("World")
     scene.world = world
-    world.use_nodes = True
+    enable_shading_nodes(world)
     tree = world.node_tree
     environment = tree.nodes.new('ShaderNodeTexEnvironment')
     environment.image = image
     background = next(n for n in tree.nodes if n.type == 'BACKGROUND')
     tree.links.new(environment.outputs["Color"], background.inputs["Color"])
     material = bpy.data.materials.new("white diffuse")
-    material.use_nodes = True
+    enable_shading_nodes(material)
     bsdf = next(n for n in material.node_tree.nodes if n.type == 'BSDF_PRINCIPLED')
     bsdf.inputs["Base Color"].default_value = (0.8, 0.8, 0.8, 1.0)
     next(bsdf.inputs[n] for n in ("Specular IOR Level", "Specular")
