@@ -116,7 +116,9 @@ class CameraProjection:
             kind = "PERSP"
             width, height = 2.0 / m[0, 0], 2.0 / m[1, 1]
             centre_x, centre_y = m[0, 2] * width * 0.5, m[1, 2] * height * 0.5
-            near, far = m[2, 3] / (m[2, 2] - 1.0), m[2, 3] / (m[2, 2] + 1.0)
+            # A far plane float32 cannot hold divides by zero here (see the NOTE above).
+            with np.errstate(divide="ignore", invalid="ignore"):
+                near, far = m[2, 3] / (m[2, 2] - 1.0), m[2, 3] / (m[2, 2] + 1.0)
         elif np.allclose(m[3], (0.0, 0.0, 0.0, 1.0), atol=1e-9):
             kind = "ORTHO"
             width, height = 2.0 / m[0, 0], 2.0 / m[1, 1]
@@ -211,22 +213,24 @@ class CameraView:
 
 
 def world_positions(camera, view_depth):
-    """(H, W, 3) world positions of pixel centres at the given view depths: the same
-    reconstruction as ``world_position_at`` in shaders/surface.glsl, in float64."""
+    """(H, W, 3) world positions of pixel centres at the given view depths, in float64:
+    the point at that depth on each pixel's ray (``world_position_at`` in
+    shaders/surface.glsl finds the same point between the near and far planes; this takes
+    the ray from the camera or, orthographic, along the view, so a far plane too far for
+    the matrix to hold changes nothing)."""
     height, width = view_depth.shape
     x = (np.arange(width) + 0.5) / width * 2.0 - 1.0
     y = (np.arange(height) + 0.5) / height * 2.0 - 1.0
     ndc = np.stack(np.broadcast_arrays(x[None, :], y[:, None]), axis=-1)     # (H, W, 2)
     world_from_clip = np.linalg.inv(camera.clip_from_world)
-    points = []
-    for z in (-1.0, 1.0):
-        clip = np.concatenate([ndc, np.full(ndc.shape[:2] + (1,), z),
-                               np.ones(ndc.shape[:2] + (1,))], axis=-1)
-        world = clip @ world_from_clip.T
-        points.append(world[..., :3] / world[..., 3:])
+    clip = np.concatenate([ndc, np.full(ndc.shape[:2] + (1,), -1.0),
+                           np.ones(ndc.shape[:2] + (1,))], axis=-1)
+    world = clip @ world_from_clip.T
+    near_points = world[..., :3] / world[..., 3:]
     position = np.asarray(camera.position, dtype=np.float64)
     forward = np.asarray(camera.forward, dtype=np.float64)
-    near_depth = (points[0] - position) @ forward
-    far_depth = (points[1] - position) @ forward
-    t = (view_depth - near_depth) / (far_depth - near_depth)
-    return points[0] + (points[1] - points[0]) * t[..., None]
+    if camera.is_perspective:
+        ray = near_points - position
+        return position + ray * (view_depth / (ray @ forward))[..., None]
+    near_depth = (near_points - position) @ forward
+    return near_points + forward * (view_depth - near_depth)[..., None]
