@@ -58,3 +58,21 @@ def test_world_positions_rebuild_points_at_their_view_depth():
     half_h = math.tan(math.radians(25)) * 20.0
     np.testing.assert_allclose(points[0, :, 1], -0.5 * half_h)
     np.testing.assert_allclose(points[:, 0, 0], -0.75 * 2.0 * half_h)
+
+
+def test_a_far_plane_float32_cannot_hold_decodes_and_unprojects_quietly():
+    """clip_end / clip_start = 1e9 rounds the float32 matrix's z row to -1: the far plane
+    decodes as infinite (taken as MAX_CLIP_RATIO x near) and pixels still find their
+    points, without numpy warnings on the user's console."""
+    import warnings
+    matrix = CameraProjection(fov_y=math.radians(50), aspect=2.0, clip_start=1e-4,
+                              clip_end=1e5).clip_from_view().astype(np.float32)
+    assert matrix[2, 2] == -1.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        view = CameraView(_look_down_minus_z(), matrix, 4, 2)
+        assert view.is_perspective and math.isfinite(view.projection.clip_end)
+        points = world_positions(view, np.full((2, 4), 20.0))
+    np.testing.assert_allclose(points[..., 2], 10.0 - 20.0)
+    half_h = math.tan(math.radians(25)) * 20.0
+    np.testing.assert_allclose(points[0, :, 1], -0.5 * half_h, rtol=1e-6)
