@@ -5,13 +5,12 @@ memory copy) and through the older per-element paths before; corner normals (4.1
 ``calc_normals_split``; RenderResult passes that take a flat array (4.x+) or rows (3.4),
 and render pass names (spelled out in 5.0, short before); the Principled BSDF's model (v1
 before 4.0) and its renamed specular and emission inputs; material alpha, shadow and
-culling settings (``blend_method``/``shadow_method`` up to 4.1, ``surface_render_method``/
-``use_transparent_shadow`` from 4.2); MikkTSpace tangents; the glTF importer of 3.4/3.5 that needs
-``np.bool``; node groups' sockets (``interface`` from 4.0); whether a material or World
-uses its nodes (always from 5.0); an object's Shadow Terminator
-Geometry Offset (Object in 5.0, the Cycles
-add-on's ``object.cycles`` before); and the exit that pip bpy 4.2 needs to keep a
-process's exit code. Callers ask
+culling settings (``blend_method``/``shadow_method`` up to 4.1,
+``surface_render_method``/``use_transparent_shadow`` from 4.2); MikkTSpace tangents; the
+glTF importer of 3.4/3.5 that needs ``np.bool``; node groups' sockets (``interface`` from
+4.0); whether a material or World uses its nodes (always from 5.0); an object's Shadow
+Terminator Geometry Offset (Object in 5.0, the Cycles add-on's ``object.cycles``
+before); and the exit that pip bpy 4.2 needs to keep a process's exit code. Callers ask
 for what they need and never test versions themselves.
 """
 
