@@ -264,6 +264,8 @@ def _render_all(runner, job, wanted, where, started):
     say(f"rendering {len(todo)} of {len(wanted)} frames of {shell_path(job.blend_path)} "
         f"{where}{kept}")
     failures = 0
+    # A file no worker can open fails every frame the same way: said once, not per frame.
+    said = set()
     for done, (frame, report) in enumerate(runner.reports(job, todo), start=1):
         _print_worker_output(report.output)
         path = shell_path(report.path)
@@ -276,7 +278,9 @@ def _render_all(runner, job, wanted, where, started):
             say(f"[{done}/{len(todo)}] {path} is there already")
         else:
             failures += 1
-            print(f"csm: error: {report.message}", file=sys.stderr, flush=True)
+            if report.message not in said:
+                said.add(report.message)
+                print(f"csm: error: {report.message}", file=sys.stderr, flush=True)
     missing = [frame for frame in wanted
                if not frame_rules.frame_done(frame_rules.frame_path(pattern, frame))]
     if missing:

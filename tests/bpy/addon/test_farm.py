@@ -182,6 +182,22 @@ def test_a_mistake_is_one_line_and_renders_nothing(demo, tmp_path, args, message
     assert not list(tmp_path.glob("f_*")), "nothing was written"
 
 
+@pytest.mark.parametrize("workers", ["0", "1"])
+def test_a_file_that_cannot_be_opened_is_said_once_not_per_frame(demo, tmp_path, workers):
+    blend, _ = demo
+    broken = tmp_path / "broken.blend"
+    broken.write_bytes(blend.read_bytes()[:4096])      # a .blend cut short: valid header
+    result = run_farm([str(broken), "--frames", "1-4", "--output",
+                       str(tmp_path / "f_####.png"), "--workers", workers], cwd=tmp_path)
+    assert result.returncode == cli.EXIT_RENDER, result.stdout + result.stderr
+    errors = [line for line in result.stderr.splitlines() if line.startswith("csm: error:")]
+    assert len(errors) == 2, result.stderr
+    assert "broken.blend" in errors[0]
+    assert errors[1].startswith("csm: error: 4 of 4 frames were not written (1, 2, 3, 4)")
+    assert "Traceback" not in result.stderr
+    assert not list(tmp_path.glob("f_*")), "nothing was written"
+
+
 def test_without_dask_one_line_says_how_to_install_it(demo, tmp_path):
     blend, _ = demo
     shadow = tmp_path / "no_dask"
