@@ -30,6 +30,8 @@ PRINCIPLED_EMISSION_INPUTS = ("Emission Color", "Emission")
 # diffuse, no layering) before 4.0, v2 from 4.0 (brdf.glsl evaluates both; the shaders
 # get PRINCIPLED_V1 defined on a v1 host).
 PRINCIPLED_V1 = bpy.app.version < (4, 0, 0)
+# 5.0 renders every material and World with its nodes and deprecates ``use_nodes``.
+ALWAYS_NODES = bpy.app.version >= (5, 0, 0)
 # Separate RGB (3.4 .. 4.x, outputs R/G/B) and Separate Color (3.3+, Red/Green/Blue).
 SEPARATE_NODE_TYPES = frozenset({'SEPARATE_COLOR', 'SEPRGB'})
 
@@ -65,7 +67,7 @@ def shading_nodes(id_block):
 
     NOTE: 5.0 always renders with nodes (files from before are converted on load) and
     deprecates ``use_nodes``, which reads True there, so it is read only before 5.0."""
-    if bpy.app.version < (5, 0, 0) and not id_block.use_nodes:
+    if not ALWAYS_NODES and not id_block.use_nodes:
         return None
     return id_block.node_tree
 
@@ -73,7 +75,7 @@ def shading_nodes(id_block):
 def enable_shading_nodes(id_block):
     """Use Nodes on for a material or World, as a script that builds one sets it; returns
     its node tree. (5.0 always uses nodes: nothing to set there.)"""
-    if bpy.app.version < (5, 0, 0):
+    if not ALWAYS_NODES:
         id_block.use_nodes = True
     return id_block.node_tree
 

@@ -29,9 +29,8 @@ TOTAL_LIMIT_S = 150.0
 sys.dont_write_bytecode = True   # no __pycache__ in the checkout
 
 STATE = {"started": time.monotonic(), "draws": 0, "draw_error": None, "mesh_uploads": 0,
-         "window": None,
-         "area": None, "region": None, "condition": None, "condition_name": "",
-         "condition_since": 0.0}
+         "window": None, "area": None, "region": None, "condition": None,
+         "condition_name": "", "condition_since": 0.0}
 REPORT = {"error": None, "blender": bpy.app.version_string, "steps": [], "timings_s": {}}
 FIRST_PERSON = {"running": False, "invoked": 0}
 SESSION = {"name": "gui", "out_dir": os.getcwd(), "report_file": "report.json",
